@@ -1,0 +1,28 @@
+# The README's two commands are `make demo` and `make test`; both install first.
+# Process-level settings (PETSC_DIR, Open MPI as root, oversubscription) live in
+# pdemfem/runtime.py and reach every command through `$(RUN)`.
+PYTHON := .venv/bin/python
+RUN := $(PYTHON) -m pdemfem.launch
+DEMO_SCENE := examples/demo.yaml
+DEMO_OUT := out/demo
+DEMO_RANKS := 2
+PYTEST_ARGS ?=
+
+.PHONY: install demo test test-serial benchmark clean
+
+install:
+	@bash scripts/install.sh
+
+demo: install
+	@$(RUN) -n $(DEMO_RANKS) -- $(PYTHON) -m pdemfem.cli run $(DEMO_SCENE) -o $(DEMO_OUT)
+	@$(RUN) -- $(PYTHON) -m pdemfem.cli plot $(DEMO_OUT) --quiet
+	@echo "demo results: $(DEMO_OUT)/ (history.csv, plots/*.png, *.xdmf for ParaView)"
+
+test: install
+	@$(RUN) -- $(PYTHON) -m pytest -q $(PYTEST_ARGS)
+
+benchmark: install
+	@$(RUN) -- $(PYTHON) benchmarks/settle.py
+
+clean:
+	rm -rf out .pytest_cache

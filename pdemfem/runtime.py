@@ -1,0 +1,80 @@
+"""Process-level environment, kept in one place.
+
+The Makefile, the test suite and the CLI all take PETSC_DIR, the Open MPI
+variables needed to run as root, oversubscription and thread pinning from here,
+so nothing of it is copied around.  Usage from a shell::
+
+    python -m pdemfem.launch -n 2 -- pdemfem run scene.yaml   # mpiexec with the right environment
+    python -m pdemfem.launch --print-env                      # export lines for a job script
+"""
+from __future__ import annotations
+
+import glob
+import os
+import shutil
+import sys
+
+# Debian installs PETSc under /usr/lib/petscdir/petscX.Y/<triplet>-real; the
+# /usr/lib/petsc alternative exists only with petsc-dev, and petsc4py needs PETSC_DIR.
+_DEBIAN_PETSC_PATTERN = "/usr/lib/petscdir/petsc*/*-linux-gnu-real"
+
+
+def find_petsc_dir() -> str | None:
+    """PETSC_DIR from the environment, else the newest Debian PETSc, else None."""
+    configured = os.environ.get("PETSC_DIR")
+    if configured:
+        return configured
+    candidates = sorted(glob.glob(_DEBIAN_PETSC_PATTERN))
+    return candidates[-1] if candidates else None
+
+
+def process_environment(base: dict | None = None) -> dict:
+    """The environment a pdemfem process (or an mpiexec launching them) needs."""
+    environment = dict(os.environ if base is None else base)
+    petsc_dir = find_petsc_dir()
+    if petsc_dir and "PETSC_DIR" not in environment:
+        environment["PETSC_DIR"] = petsc_dir
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        environment.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        environment.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    # More ranks than cores is how decomposition is tested on small machines.
+    environment.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
+    # Containers often forbid cross-memory attach; without this Open MPI prints
+    # errors on every large shared-memory message.
+    environment.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
+    # Debian's h5py picks its MPI build only under mpiexec; use it always so a
+    # one-process run writes through the same (collective) code path.
+    environment.setdefault("H5PY_ALWAYS_USE_MPI", "1")
+    # One thread per rank: MPI ranks are the parallelism, BLAS threads would compete.
+    for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        environment.setdefault(variable, "1")
+    return environment
+
+
+def apply_to_this_process() -> None:
+    """Set the variables in os.environ before petsc4py / mpi4py are imported.
+
+    Debian's petsc4py is put on sys.path by a .pth file that reads PETSC_DIR when
+    the interpreter starts; when PETSC_DIR was not set then, add the path here.
+    """
+    for key, value in process_environment().items():
+        if os.environ.get(key) != value:
+            os.environ[key] = value
+    petsc_dir = os.environ.get("PETSC_DIR")
+    if petsc_dir:
+        petsc_python_path = os.path.join(petsc_dir, "lib", "python3", "dist-packages")
+        if os.path.isdir(petsc_python_path) and petsc_python_path not in sys.path:
+            sys.path.append(petsc_python_path)
+
+
+def mpiexec_executable() -> str:
+    for name in ("mpiexec", "mpirun"):
+        path = shutil.which(name)
+        if path:
+            return path
+    raise FileNotFoundError("mpiexec not found: install Open MPI (make install) or load your cluster's MPI module")
+
+
+def mpiexec_command(ranks: int, command: list[str]) -> list[str]:
+    """Command line that runs `command` on `ranks` MPI processes."""
+    return [mpiexec_executable(), "-n", str(ranks), *command]

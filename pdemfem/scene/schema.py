@@ -1,0 +1,194 @@
+"""The validated scene model: YAML keys map one-to-one onto these fields.
+
+Key names are a public contract (external scripts write scene files); add keys,
+never rename them.  Validation is pydantic's; pdemfem.scene.loader turns its
+errors into one message per problem that names the key path and the fix.
+"""
+from __future__ import annotations
+
+from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+PositiveFloat = Annotated[float, Field(gt=0)]
+NonNegativeFloat = Annotated[float, Field(ge=0)]
+Vector3 = Tuple[float, float, float]
+
+
+class StrictModel(BaseModel):
+    # Unknown keys are errors: a misspelt key must never be silently ignored.
+    model_config = ConfigDict(extra="forbid", frozen=False)
+
+
+class TimeConfig(StrictModel):
+    end: PositiveFloat = Field(description="simulated end time [s]")
+    dt: Union[PositiveFloat, Literal["auto"]] = Field("auto", description='time step [s] or "auto"')
+    dt_factor: Annotated[float, Field(gt=0, le=1)] = Field(
+        0.2, description="dt = dt_factor * Rayleigh time when dt is auto (0.1-0.3 usual)"
+    )
+    expected_impact_speed: Optional[PositiveFloat] = Field(
+        None, description="largest impact speed [m/s] for the contact-duration check; estimated when absent"
+    )
+
+
+class MaterialConfig(StrictModel):
+    density: PositiveFloat
+    youngs_modulus: PositiveFloat
+    poisson_ratio: Annotated[float, Field(gt=-1.0, lt=0.5)]
+    thermal_expansion: NonNegativeFloat = 0.0
+    conductivity: Optional[PositiveFloat] = None
+    heat_capacity: Optional[PositiveFloat] = None
+
+
+class InteractionConfig(StrictModel):
+    model: Literal["hertz_mindlin", "linear_spring_dashpot"] = "hertz_mindlin"
+    restitution: Annotated[float, Field(gt=0, le=1)] = 0.5
+    friction: NonNegativeFloat = 0.5
+    rolling_friction: NonNegativeFloat = 0.0
+    # Linear spring-dashpot only: when absent, derived from the materials so that
+    # the peak overlap at `expected_impact_speed` equals Hertz's.
+    normal_stiffness: Optional[PositiveFloat] = None
+    tangential_stiffness_ratio: Annotated[float, Field(gt=0)] = Field(
+        2.0 / 7.0, description="k_t / k_n for the linear model (2/7 matches normal and tangential periods)"
+    )
+
+
+class RadiusRange(StrictModel):
+    min: PositiveFloat
+    max: PositiveFloat
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if self.max < self.min:
+            raise ValueError(f"max ({self.max}) is smaller than min ({self.min}); swap them")
+        return self
+
+
+class BoxRegion(StrictModel):
+    box: Tuple[Vector3, Vector3]
+
+    @field_validator("box")
+    @classmethod
+    def _ordered(cls, box):
+        low, high = box
+        if any(h <= l for l, h in zip(low, high)):
+            raise ValueError("box must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] with every max > min")
+        return box
+
+
+class InsertConfig(StrictModel):
+    kind: Literal["list", "lattice", "random"]
+    region: Optional[BoxRegion] = None
+    count: Optional[Annotated[int, Field(gt=0)]] = None
+    seed: int = 0
+    # kind: list
+    positions: Optional[List[Vector3]] = None
+    velocities: Optional[List[Vector3]] = None
+    angular_velocities: Optional[List[Vector3]] = None
+    radii: Optional[List[PositiveFloat]] = None
+    # kind: lattice / random
+    velocity: Vector3 = (0.0, 0.0, 0.0)
+    spacing: Optional[PositiveFloat] = Field(None, description="lattice spacing; default largest diameter * 1.05")
+    jitter: Annotated[float, Field(ge=0, le=1)] = Field(0.0, description="random offset as a fraction of the lattice gap")
+    max_attempts: Annotated[int, Field(gt=0)] = 1000
+
+    @model_validator(mode="after")
+    def _complete(self):
+        if self.kind == "list":
+            if not self.positions:
+                raise ValueError("kind list needs positions: [[x,y,z], ...]")
+            for key in ("velocities", "angular_velocities", "radii"):
+                values = getattr(self, key)
+                if values is not None and len(values) != len(self.positions):
+                    raise ValueError(f"{key} has {len(values)} entries but positions has {len(self.positions)}")
+        else:
+            if self.region is None:
+                raise ValueError(f"kind {self.kind} needs region: {{box: [[x0,y0,z0],[x1,y1,z1]]}}")
+            if self.count is None:
+                raise ValueError(f"kind {self.kind} needs count: the number of particles to insert")
+        return self
+
+
+class ParticleGroupConfig(StrictModel):
+    name: str
+    material: str
+    radius: Union[PositiveFloat, RadiusRange]
+    insert: InsertConfig
+    initial_temperature: Optional[PositiveFloat] = None
+
+
+class WallConfig(StrictModel):
+    name: str
+    kind: Literal["plane"]
+    material: str
+    point: Vector3 = (0.0, 0.0, 0.0)
+    normal: Vector3 = (0.0, 0.0, 1.0)
+    velocity: Vector3 = Field((0.0, 0.0, 0.0), description="prescribed wall velocity [m/s]")
+    temperature: Optional[PositiveFloat] = None
+
+    @field_validator("normal")
+    @classmethod
+    def _nonzero(cls, normal):
+        if sum(c * c for c in normal) == 0.0:
+            raise ValueError("normal must be a non-zero vector")
+        return normal
+
+
+class OutputConfig(StrictModel):
+    dir: str = "out"
+    every: Optional[PositiveFloat] = Field(None, description="output interval [s]; default end/100")
+
+
+class NeighborConfig(StrictModel):
+    skin: Optional[PositiveFloat] = Field(
+        None, description="Verlet skin [m]; default 0.3 * smallest radius (larger: rarer rebuilds, longer lists)"
+    )
+
+
+class Scene(StrictModel):
+    time: TimeConfig
+    gravity: Vector3 = (0.0, 0.0, -9.81)
+    materials: Dict[str, MaterialConfig]
+    interactions: Dict[str, InteractionConfig] = Field(default_factory=lambda: {"default": InteractionConfig()})
+    particles: List[ParticleGroupConfig] = Field(default_factory=list)
+    walls: List[WallConfig] = Field(default_factory=list)
+    output: OutputConfig = Field(default_factory=OutputConfig)
+    neighbors: NeighborConfig = Field(default_factory=NeighborConfig)
+
+    @model_validator(mode="after")
+    def _references(self):
+        known = set(self.materials)
+        for index, group in enumerate(self.particles):
+            if group.material not in known:
+                raise ValueError(
+                    f"particles[{index}].material: unknown material '{group.material}'; "
+                    f"define it under materials (known: {sorted(known)})"
+                )
+        for index, wall in enumerate(self.walls):
+            if wall.material not in known:
+                raise ValueError(
+                    f"walls[{index}].material: unknown material '{wall.material}'; "
+                    f"define it under materials (known: {sorted(known)})"
+                )
+        for key in self.interactions:
+            if key == "default":
+                continue
+            names = key.split("-")
+            if len(names) != 2 or any(name not in known for name in names):
+                raise ValueError(
+                    f"interactions.{key}: name 'default' or 'materialA-materialB' with known materials "
+                    f"(known: {sorted(known)})"
+                )
+        for kind, items in (("particles", self.particles), ("walls", self.walls)):
+            names = [item.name for item in items]
+            duplicates = sorted({name for name in names if names.count(name) > 1})
+            if duplicates:
+                raise ValueError(f"{kind}: duplicate names {duplicates}; give each entry its own name")
+        return self
+
+    def interaction(self, material_a: str, material_b: str) -> InteractionConfig:
+        """The interaction for a pair of materials: 'a-b' or 'b-a', else 'default'."""
+        for key in (f"{material_a}-{material_b}", f"{material_b}-{material_a}", "default"):
+            if key in self.interactions:
+                return self.interactions[key]
+        return InteractionConfig()
