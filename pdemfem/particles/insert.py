@@ -1,0 +1,254 @@
+"""Initial particle placement: explicit lists, lattices and random packings.
+
+Groups are inserted in scene order and each new particle is checked against all
+earlier ones, so no insertion starts with overlaps.  Ids are 0..N-1 in that
+order.  Failures are SceneErrors naming the key and the fix.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from pdemfem.errors import SceneError
+from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
+
+
+@dataclass
+class InsertedParticles:
+    group_index: np.ndarray
+    radii: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    angular_velocities: np.ndarray
+
+
+# Overlaps smaller than this fraction of the smaller radius count as touching, not overlapping.
+OVERLAP_TOLERANCE = 1e-9
+
+
+@njit(cache=True)
+def _first_overlap(positions, radii, cells, starts, dimensions, tolerance):
+    nx, ny, nz = dimensions[0], dimensions[1], dimensions[2]
+    for i in range(positions.shape[0]):
+        cell = cells[i]
+        cx = cell % nx
+        cy = (cell // nx) % ny
+        cz = cell // (nx * ny)
+        for dz in range(-1, 2):
+            for dy in range(-1, 2):
+                for dx in range(-1, 2):
+                    x, y, z = cx + dx, cy + dy, cz + dz
+                    if x < 0 or y < 0 or z < 0 or x >= nx or y >= ny or z >= nz:
+                        continue
+                    neighbour = x + nx * (y + ny * z)
+                    for j in range(starts[neighbour], starts[neighbour + 1]):
+                        if j <= i:
+                            continue
+                        distance = 0.0
+                        for axis in range(3):
+                            offset = positions[i, axis] - positions[j, axis]
+                            distance += offset * offset
+                        limit = radii[i] + radii[j] - tolerance * min(radii[i], radii[j])
+                        if distance < limit * limit:
+                            return i, j
+    return -1, -1
+
+
+def first_overlap(positions: np.ndarray, radii: np.ndarray):
+    """Indices (i, j) of some overlapping pair, or None."""
+    if len(radii) < 2:
+        return None
+    lower, size, dimensions = cell_grid(positions, 2.0 * float(radii.max()))
+    cells = cell_indices(positions, lower, size, dimensions)
+    order = np.argsort(cells, kind="stable")
+    sorted_cells = np.ascontiguousarray(cells[order])
+    starts = cell_starts(sorted_cells, int(np.prod(dimensions)))
+    i, j = _first_overlap(np.ascontiguousarray(positions[order]), np.ascontiguousarray(radii[order]),
+                          sorted_cells, starts, dimensions, OVERLAP_TOLERANCE)
+    if i < 0:
+        return None
+    return int(order[i]), int(order[j])
+
+
+@njit(cache=True)
+def _random_place(lower, upper, radii, fixed_positions, fixed_radii, cell_size, dimensions, grid_lower,
+                  max_attempts, seed):
+    """Random sequential addition with a linked-cell grid; returns (positions, placed count)."""
+    np.random.seed(seed)
+    nx, ny, nz = dimensions[0], dimensions[1], dimensions[2]
+    total = fixed_positions.shape[0] + radii.shape[0]
+    all_positions = np.empty((total, 3))
+    all_radii = np.empty(total)
+    cell_head = -np.ones(nx * ny * nz, dtype=np.int64)
+    next_in_cell = -np.ones(total, dtype=np.int64)
+    stored = 0
+    for k in range(fixed_positions.shape[0]):
+        all_positions[stored] = fixed_positions[k]
+        all_radii[stored] = fixed_radii[k]
+        c = np.empty(3, dtype=np.int64)
+        for axis in range(3):
+            c[axis] = min(max(int((fixed_positions[k, axis] - grid_lower[axis]) / cell_size), 0), dimensions[axis] - 1)
+        cell = c[0] + nx * (c[1] + ny * c[2])
+        next_in_cell[stored] = cell_head[cell]
+        cell_head[cell] = stored
+        stored += 1
+    placed = 0
+    positions = np.empty((radii.shape[0], 3))
+    for p in range(radii.shape[0]):
+        radius = radii[p]
+        success = False
+        for attempt in range(max_attempts):
+            candidate = np.empty(3)
+            for axis in range(3):
+                low = lower[axis] + radius
+                high = upper[axis] - radius
+                candidate[axis] = low + (high - low) * np.random.random()
+            c = np.empty(3, dtype=np.int64)
+            for axis in range(3):
+                c[axis] = min(max(int((candidate[axis] - grid_lower[axis]) / cell_size), 0), dimensions[axis] - 1)
+            free = True
+            for dz in range(-1, 2):
+                for dy in range(-1, 2):
+                    for dx in range(-1, 2):
+                        x, y, z = c[0] + dx, c[1] + dy, c[2] + dz
+                        if x < 0 or y < 0 or z < 0 or x >= nx or y >= ny or z >= nz:
+                            continue
+                        other = cell_head[x + nx * (y + ny * z)]
+                        while other >= 0 and free:
+                            distance = 0.0
+                            for axis in range(3):
+                                offset = candidate[axis] - all_positions[other, axis]
+                                distance += offset * offset
+                            limit = radius + all_radii[other]
+                            if distance < limit * limit:
+                                free = False
+                            other = next_in_cell[other]
+            if free:
+                positions[p] = candidate
+                all_positions[stored] = candidate
+                all_radii[stored] = radius
+                cell = c[0] + nx * (c[1] + ny * c[2])
+                next_in_cell[stored] = cell_head[cell]
+                cell_head[cell] = stored
+                stored += 1
+                placed += 1
+                success = True
+                break
+        if not success:
+            return positions, placed
+    return positions, placed
+
+
+def _group_radii(group, count, rng):
+    if isinstance(group.radius, float):
+        return np.full(count, group.radius)
+    return rng.uniform(group.radius.min, group.radius.max, size=count)
+
+
+def _largest_radius(group) -> float:
+    return group.radius if isinstance(group.radius, float) else group.radius.max
+
+
+def _lattice_positions(group, where: str, rng):
+    insert = group.insert
+    low, high = (np.array(corner, dtype=float) for corner in insert.region.box)
+    largest = _largest_radius(group)
+    spacing = insert.spacing or 2.0 * largest * 1.05
+    if spacing < 2.0 * largest:
+        raise SceneError(f"{where}.spacing", f"spacing {spacing} is smaller than the largest diameter {2 * largest}",
+                         "use a spacing of at least the largest particle diameter, or leave it out")
+    per_axis = np.floor((high - low - 2.0 * largest) / spacing).astype(int) + 1
+    per_axis = np.maximum(per_axis, 0)
+    capacity = int(np.prod(per_axis))
+    if capacity < insert.count:
+        raise SceneError(f"{where}.count",
+                         f"the region holds only {capacity} particles on a lattice of spacing {spacing:g} m "
+                         f"({per_axis[0]} x {per_axis[1]} x {per_axis[2]}), not {insert.count}",
+                         "enlarge region.box, reduce count, or reduce spacing")
+    index = np.arange(insert.count)
+    ix = index % per_axis[0]
+    iy = (index // per_axis[0]) % per_axis[1]
+    iz = index // (per_axis[0] * per_axis[1])
+    positions = low + largest + spacing * np.stack([ix, iy, iz], axis=1).astype(float)
+    if insert.jitter > 0.0:
+        gap = spacing - 2.0 * largest
+        positions += rng.uniform(-0.5, 0.5, size=positions.shape) * insert.jitter * gap
+    return positions
+
+
+def insert_particles(scene) -> InsertedParticles:
+    """Place every group's particles; raise SceneError when a group cannot be placed."""
+    group_index, radii, positions, velocities, spins = [], [], [], [], []
+    placed_positions = np.zeros((0, 3))
+    placed_radii = np.zeros(0)
+    for index, group in enumerate(scene.particles):
+        where = f"particles[{index}].insert"
+        insert = group.insert
+        rng = np.random.default_rng(insert.seed)
+        if insert.kind == "list":
+            group_positions = np.array(insert.positions, dtype=float).reshape(-1, 3)
+            count = len(group_positions)
+            group_radii = (np.array(insert.radii, dtype=float) if insert.radii is not None
+                           else _group_radii(group, count, rng))
+            group_velocities = (np.array(insert.velocities, dtype=float).reshape(-1, 3)
+                                if insert.velocities is not None else np.tile(insert.velocity, (count, 1)))
+            group_spins = (np.array(insert.angular_velocities, dtype=float).reshape(-1, 3)
+                           if insert.angular_velocities is not None else np.zeros((count, 3)))
+        else:
+            count = insert.count
+            group_radii = _group_radii(group, count, rng)
+            group_velocities = np.tile(np.array(insert.velocity, dtype=float), (count, 1))
+            group_spins = np.zeros((count, 3))
+            if insert.kind == "lattice":
+                group_positions = _lattice_positions(group, where, rng)
+            else:
+                group_positions = _random_positions(group, group_radii, placed_positions, placed_radii, where)
+        combined_positions = np.concatenate([placed_positions, group_positions])
+        combined_radii = np.concatenate([placed_radii, group_radii])
+        if insert.kind != "random":
+            overlap = first_overlap(combined_positions, combined_radii)
+            if overlap is not None:
+                raise SceneError(where, _describe_overlap(scene, overlap, combined_positions, combined_radii),
+                                 "move the positions apart (distance >= sum of radii) or shrink the radii")
+        placed_positions, placed_radii = combined_positions, combined_radii
+        group_index.append(np.full(count, index, dtype=np.int32))
+        radii.append(group_radii)
+        positions.append(group_positions)
+        velocities.append(group_velocities)
+        spins.append(group_spins)
+    if not radii:
+        empty = np.zeros((0, 3))
+        return InsertedParticles(np.zeros(0, dtype=np.int32), np.zeros(0), empty, empty.copy(), empty.copy())
+    return InsertedParticles(np.concatenate(group_index), np.concatenate(radii), np.concatenate(positions),
+                             np.concatenate(velocities), np.concatenate(spins))
+
+
+def _random_positions(group, radii, placed_positions, placed_radii, where):
+    insert = group.insert
+    low, high = (np.array(corner, dtype=float) for corner in insert.region.box)
+    largest = float(max(radii.max(), placed_radii.max() if len(placed_radii) else 0.0))
+    if np.any(high - low < 2.0 * radii.max()):
+        raise SceneError(f"{where}.region.box", "the region is thinner than one particle diameter",
+                         "enlarge region.box")
+    grid_lower = np.minimum(low, placed_positions.min(axis=0) if len(placed_positions) else low)
+    grid_upper = np.maximum(high, placed_positions.max(axis=0) if len(placed_positions) else high)
+    cell_size = 2.0 * largest
+    dimensions = (np.floor((grid_upper - grid_lower) / cell_size).astype(np.int64) + 1)
+    positions, placed = _random_place(low, high, radii, placed_positions, placed_radii, cell_size, dimensions,
+                                      grid_lower, insert.max_attempts, insert.seed)
+    if placed < len(radii):
+        solid_fraction = (4.0 / 3.0 * np.pi * np.sum(radii**3)) / np.prod(high - low)
+        raise SceneError(f"{where}.count",
+                         f"random insertion placed only {placed} of {len(radii)} particles "
+                         f"(requested solid fraction {solid_fraction:.2f}; random packings jam near 0.3-0.38)",
+                         "enlarge region.box, reduce count, raise max_attempts, or use kind: lattice")
+    return positions
+
+
+def _describe_overlap(scene, overlap, positions, radii):
+    i, j = overlap
+    distance = float(np.linalg.norm(positions[i] - positions[j]))
+    return (f"particles {i} and {j} overlap at insertion (centre distance {distance:g} m < "
+            f"radius sum {radii[i] + radii[j]:g} m; indices count across groups in scene order)")

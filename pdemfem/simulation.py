@@ -1,0 +1,182 @@
+"""Simulation: builds everything from a scene and runs the step loop.
+
+Data flows one way: scene -> built state (arrays, PETSc objects) -> step loop
+-> writers.  Nothing is written to disk before the whole scene has been built
+and validated, so a bad scene leaves no output directory behind.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+from mpi4py import MPI
+
+from pdemfem.contact.tables import build_contact_tables
+from pdemfem.io.history import HistoryWriter
+from pdemfem.particles.insert import insert_particles
+from pdemfem.particles.state import ParticleState
+from pdemfem.particles.system import ParticleSystem
+from pdemfem.scene import derived
+from pdemfem.scene.loader import load_scene, output_directory
+from pdemfem.walls.plane import PlaneWalls
+
+# The skin a scene gets when it names none, as a fraction of the smallest radius:
+# larger skins rebuild the list less often but carry more non-touching pairs.
+DEFAULT_SKIN_FRACTION = 0.3
+
+
+class Simulation:
+    """A coupled DEM(-FEM) simulation built from a validated scene."""
+
+    def __init__(self, scene, base_dir: Path, comm=None, output_dir=None):
+        self.comm = comm if comm is not None else MPI.COMM_WORLD
+        self.scene = scene
+        self.base_dir = Path(base_dir)
+        self.output_dir = output_directory(scene, self.base_dir, output_dir)
+        self.dt = float(derived.time_step(scene))
+        self.time = 0.0
+        self.step_count = 0
+        self._history = None
+        self.particle_system = self._build_particles()
+
+    # ------------------------------------------------------------ construction
+    @classmethod
+    def from_file(cls, path, comm=None, output_dir=None):
+        scene, base_dir = load_scene(path)
+        return cls(scene, base_dir, comm=comm, output_dir=output_dir)
+
+    @classmethod
+    def from_dict(cls, data: dict, comm=None, base_dir=None, output_dir=None):
+        scene, base_dir = load_scene(data, base_dir=base_dir)
+        return cls(scene, base_dir, comm=comm, output_dir=output_dir)
+
+    def _build_particles(self) -> ParticleSystem:
+        scene = self.scene
+        tables = build_contact_tables(scene, characteristic_speed=derived.expected_impact_speed(scene))
+        inserted = insert_particles(scene)
+        group_material = np.array([tables.material_names.index(group.material) for group in scene.particles],
+                                  dtype=np.int32)
+        group_density = np.array([scene.materials[group.material].density for group in scene.particles])
+        group_temperature = np.array([group.initial_temperature or 0.0 for group in scene.particles])
+        count = len(inserted.radii)
+        state = ParticleState(
+            ids=np.arange(count, dtype=np.int64),
+            material_index=group_material[inserted.group_index] if count else np.zeros(0, np.int32),
+            radii=inserted.radii,
+            densities=group_density[inserted.group_index] if count else np.zeros(0),
+            positions=inserted.positions,
+            velocities=inserted.velocities,
+            angular_velocities=inserted.angular_velocities,
+            temperatures=group_temperature[inserted.group_index] if count else np.zeros(0),
+            wall_count=len(scene.walls),
+        )
+        walls = PlaneWalls(scene.walls, tables.material_names)
+        smallest_radius = float(inserted.radii.min()) if count else 1.0
+        skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
+        return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm)
+
+    # ------------------------------------------------------------ stepping
+    def step(self, count: int = 1) -> None:
+        for _ in range(int(count)):
+            self.particle_system.step()
+            self.step_count += 1
+            self.time = self.step_count * self.dt
+
+    @property
+    def output_interval(self) -> float:
+        return self.scene.output.every or self.scene.time.end / 100.0
+
+    def run(self, progress: bool = True) -> None:
+        """Advance to time.end, writing history rows every output interval."""
+        end = self.scene.time.end
+        total_steps = int(math.ceil(end / self.dt - 1e-9))
+        steps_per_output = max(1, int(round(self.output_interval / self.dt)))
+        self._open_outputs()
+        if self.step_count == 0:
+            self._write_history()
+        bar = _progress_bar(end, progress and self.comm.rank == 0)
+        try:
+            while self.step_count < total_steps:
+                chunk = min(steps_per_output - self.step_count % steps_per_output, total_steps - self.step_count)
+                self.step(chunk)
+                if self.step_count % steps_per_output == 0 or self.step_count == total_steps:
+                    self._write_history()
+                if bar is not None:
+                    bar.update(min(self.time, end) - bar.n)
+        finally:
+            if bar is not None:
+                bar.close()
+            self._close_outputs()
+
+    # ------------------------------------------------------------ output
+    def _open_outputs(self) -> None:
+        if self.comm.rank == 0:
+            self.output_dir.mkdir(parents=True, exist_ok=True)
+        self.comm.Barrier()
+        columns = ["time", "step", "particles", "kinetic_energy", "rotational_energy", "potential_energy",
+                   "elastic_energy", "dissipated_energy", "wall_work", "contacts"]
+        for name in self.particle_system.walls.names:
+            columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
+        self._history = HistoryWriter(self.output_dir / "history.csv", columns, self.comm.rank == 0,
+                                      append=self.step_count > 0)
+
+    def _close_outputs(self) -> None:
+        if self._history is not None:
+            self._history.close()
+            self._history = None
+
+    def history_row(self) -> dict:
+        system = self.particle_system
+        row = {"time": self.time, "step": self.step_count, "particles": self.particle_count(),
+               "contacts": system.contact_count}
+        row.update(system.energies())
+        for index, name in enumerate(system.walls.names):
+            for axis, label in enumerate("xyz"):
+                row[f"force_{name}_{label}"] = system.walls.forces[index, axis]
+        return row
+
+    def _write_history(self) -> None:
+        if self._history is not None:
+            self._history.write(self.history_row())
+
+    # ------------------------------------------------------------ queries
+    @property
+    def particles(self):
+        """The particles this rank owns, as numpy arrays (copies)."""
+        state = self.particle_system.state
+        first, last = self.particle_system.owned_range()
+        return SimpleNamespace(
+            ids=state.ids[first:last].copy(),
+            radii=state.radii[first:last].copy(),
+            positions=state.positions[first:last].copy(),
+            velocities=state.velocities[first:last].copy(),
+            angular_velocities=state.angular_velocities[first:last].copy(),
+            forces=state.forces[first:last].copy(),
+            temperatures=state.temperatures[first:last].copy(),
+        )
+
+    def particle_count(self) -> int:
+        """Total number of particles over all ranks."""
+        return self.particle_system.state.count
+
+    def wall_force(self, name: str) -> np.ndarray:
+        """Total contact force the particles exert on a wall (summed over ranks)."""
+        walls = self.particle_system.walls
+        return walls.forces[walls.index(name)].copy()
+
+    def contact_count(self) -> int:
+        return self.particle_system.contact_count
+
+    def energies(self) -> dict:
+        return self.particle_system.energies()
+
+
+def _progress_bar(end: float, enabled: bool):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=end, unit="s", unit_scale=False, desc="simulated time",
+                bar_format="{l_bar}{bar}| {n:.4g}/{total:.4g} s [{elapsed}<{remaining}, {rate_fmt}]")

@@ -1,0 +1,35 @@
+"""Analytic plane walls: flat rigid bodies with an optional prescribed velocity."""
+from __future__ import annotations
+
+import numpy as np
+
+
+class PlaneWalls:
+    """Arrays for all plane walls of a scene; the normal points into the particles' side."""
+
+    def __init__(self, wall_configs, material_names: list):
+        self.names = [wall.name for wall in wall_configs]
+        count = len(self.names)
+        self.points = np.array([wall.point for wall in wall_configs], dtype=float).reshape(count, 3)
+        normals = np.array([wall.normal for wall in wall_configs], dtype=float).reshape(count, 3)
+        lengths = np.linalg.norm(normals, axis=1) if count else np.zeros(0)
+        self.normals = normals / lengths[:, None] if count else normals
+        self.velocities = np.array([wall.velocity for wall in wall_configs], dtype=float).reshape(count, 3)
+        self.material_index = np.array([material_names.index(wall.material) for wall in wall_configs],
+                                       dtype=np.int32)
+        self.forces = np.zeros((count, 3))
+        # Work the walls have done on the particles (a moving wall feeds energy in).
+        self.work = 0.0
+
+    @property
+    def count(self) -> int:
+        return len(self.names)
+
+    def move(self, dt: float) -> None:
+        self.points += dt * self.velocities
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"no wall named '{name}' (walls: {self.names})") from None
