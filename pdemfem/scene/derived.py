@@ -1,0 +1,404 @@
+"""Quantities derived from a scene before anything is built (pure functions, no arrays).
+
+Used by `pdemfem check`, by the simulation to pick dt, and in the docs:
+
+    rayleigh_time(scene)              critical-step scale T_R = pi r sqrt(rho/G) / (0.1631 nu + 0.8766)
+    time_step(scene)                  dt, or dt_factor * T_R when dt is "auto"
+    expected_impact_speed(scene)      largest impact speed the scene should see
+    hertz_contact_duration(scene, v)  shortest Hertz contact durations (particle-particle, particle-wall)
+    contact_duration(scene, v)        the same for the model each pair uses (Hertz or linear spring)
+    particle_count(scene), memory_estimate_bytes(scene), warnings(scene)
+
+All in SI units.  "Smallest particle" means the smallest radius a group can have
+(radius.min for a spread, min(radii) for a list).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Optional, Tuple
+
+from pdemfem.errors import SceneError
+from pdemfem.scene.schema import MaterialConfig, ParticleGroupConfig, RadiusRange, Scene, WallConfig
+
+__all__ = [
+    "rayleigh_time",
+    "time_step",
+    "expected_impact_speed",
+    "impact_speed_estimate",
+    "hertz_contact_duration",
+    "contact_duration",
+    "ContactDurations",
+    "particle_count",
+    "group_counts",
+    "memory_estimate_bytes",
+    "BYTES_PER_PARTICLE",
+    "warnings",
+    "DT_PER_CONTACT",
+    "MAX_STEP_TRAVEL",
+]
+
+# Hertz contact duration prefactor: t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5)  (DESIGN.md 1.1).
+HERTZ_DURATION_FACTOR = 2.868
+# A contact should be resolved by at least this many steps (DESIGN.md 1.1).
+DT_PER_CONTACT = 30.0
+# A particle should move at most this fraction of its radius per step at the impact speed.
+MAX_STEP_TRAVEL = 0.1
+
+
+# --------------------------------------------------------------------------- per-group helpers
+
+
+def group_radius_range(group: ParticleGroupConfig) -> Tuple[float, float]:
+    """(smallest, largest) radius a group can have."""
+    if group.insert.kind == "list" and group.insert.radii:
+        return float(min(group.insert.radii)), float(max(group.insert.radii))
+    if isinstance(group.radius, RadiusRange):
+        return float(group.radius.min), float(group.radius.max)
+    return float(group.radius), float(group.radius)
+
+
+def group_counts(scene: Scene) -> List[int]:
+    """Particles each group inserts, in scene order."""
+    counts = []
+    for group in scene.particles:
+        insert = group.insert
+        counts.append(len(insert.positions or ()) if insert.kind == "list" else int(insert.count or 0))
+    return counts
+
+
+def particle_count(scene: Scene) -> int:
+    """Total number of particles the scene inserts."""
+    return int(sum(group_counts(scene)))
+
+
+def _shear_modulus(material: MaterialConfig) -> float:
+    return material.youngs_modulus / (2.0 * (1.0 + material.poisson_ratio))
+
+
+def _mass(material: MaterialConfig, radius: float) -> float:
+    return 4.0 / 3.0 * math.pi * radius**3 * material.density
+
+
+def _effective_modulus(a: MaterialConfig, b: MaterialConfig) -> float:
+    """1/E* = (1-nu_a^2)/E_a + (1-nu_b^2)/E_b."""
+    return 1.0 / ((1.0 - a.poisson_ratio**2) / a.youngs_modulus + (1.0 - b.poisson_ratio**2) / b.youngs_modulus)
+
+
+# --------------------------------------------------------------------------- time step
+
+
+def rayleigh_time(scene: Scene) -> Optional[float]:
+    """Smallest Rayleigh time over the particle groups, or None when the scene has no particles.
+
+    T_R = pi r sqrt(rho / G) / (0.1631 nu + 0.8766), G = E / (2 (1 + nu)), with r
+    each group's smallest radius.
+    """
+    times = []
+    for group in scene.particles:
+        material = scene.materials[group.material]
+        radius, _ = group_radius_range(group)
+        nu = material.poisson_ratio
+        times.append(math.pi * radius * math.sqrt(material.density / _shear_modulus(material)) / (0.1631 * nu + 0.8766))
+    return min(times) if times else None
+
+
+def time_step(scene: Scene) -> float:
+    """The step: time.dt in seconds, or time.dt_factor * rayleigh_time when dt is "auto"."""
+    if scene.time.dt != "auto":
+        return float(scene.time.dt)
+    rayleigh = rayleigh_time(scene)
+    if rayleigh is None:
+        raise SceneError(
+            "time.dt",
+            'dt "auto" derives the step from the particles, but the scene has none',
+            "give time.dt in seconds",
+        )
+    return scene.time.dt_factor * rayleigh
+
+
+# --------------------------------------------------------------------------- impact speed
+
+
+def _up(scene: Scene) -> Optional[Tuple[float, float, float]]:
+    g = math.sqrt(sum(c * c for c in scene.gravity))
+    if g == 0.0:
+        return None
+    return tuple(-c / g for c in scene.gravity)
+
+
+def _dot(a, b) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _norm(a) -> float:
+    return math.sqrt(_dot(a, a))
+
+
+def _group_points(group: ParticleGroupConfig) -> List[Tuple[float, float, float]]:
+    """Points bounding where a group's particles start: region box corners or list positions."""
+    insert = group.insert
+    if insert.kind == "list":
+        return [tuple(p) for p in insert.positions or ()]
+    (x0, y0, z0), (x1, y1, z1) = insert.region.box
+    return [(x, y, z) for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)]
+
+
+def _initial_speeds(group: ParticleGroupConfig) -> List[float]:
+    insert = group.insert
+    if insert.kind == "list" and insert.velocities:
+        return [_norm(v) for v in insert.velocities]
+    return [_norm(insert.velocity)]
+
+
+def fall_height(scene: Scene) -> float:
+    """Largest free-fall height h of the scene (the rule `expected_impact_speed` uses).
+
+    Heights are measured against gravity.  For every starting point (the corners of
+    each insertion region, or each listed position) the drop is the distance down
+    to the first plane wall below it that faces upwards (normal . up > 0, e.g. a
+    floor or a tilted chute) -- along the vertical, so tilted planes count where
+    the point actually is.  When no such wall lies below a point, the drop is taken
+    to the lowest starting point of all particles (particles then only hit each
+    other).  h is the largest drop; 0 without gravity or particles.  Conservative
+    by up to two radii (region corners bound the centres).
+    """
+    up = _up(scene)
+    points = [point for group in scene.particles for point in _group_points(group)]
+    if up is None or not points:
+        return 0.0
+    lowest = min(_dot(point, up) for point in points)
+    height = 0.0
+    for point in points:
+        drops = []
+        for wall in scene.walls:
+            normal = wall.normal
+            facing = _dot(normal, up)
+            if facing <= 1e-12:
+                continue
+            # Move from `point` along -up until n . (x - p0) = 0.
+            drop = (_dot(normal, point) - _dot(normal, wall.point)) / facing
+            if drop >= 0.0:
+                drops.append(drop)
+        height = max(height, min(drops) if drops else _dot(point, up) - lowest)
+    return height
+
+
+def impact_speed_estimate(scene: Scene) -> Tuple[float, str]:
+    """(speed, how it was obtained) -- see `expected_impact_speed`."""
+    if scene.time.expected_impact_speed is not None:
+        return float(scene.time.expected_impact_speed), "time.expected_impact_speed"
+    initial = max((speed for group in scene.particles for speed in _initial_speeds(group)), default=0.0)
+    wall_speed = max((_norm(wall.velocity) for wall in scene.walls), default=0.0)
+    g = _norm(scene.gravity)
+    height = fall_height(scene)
+    speed = initial + math.sqrt(2.0 * g * height) + wall_speed
+    how = (
+        f"estimated: largest initial speed {initial:.3g} m/s + free fall sqrt(2 g h) over h = {height:.3g} m"
+        + (f" + wall speed {wall_speed:.3g} m/s" if wall_speed else "")
+    )
+    return speed, how
+
+
+def expected_impact_speed(scene: Scene) -> float:
+    """Largest impact speed [m/s] the scene should see.
+
+    time.expected_impact_speed when set; otherwise the largest initial particle
+    speed + sqrt(2 |g| h) + the largest wall speed, with h = `fall_height(scene)`.
+    A lower bound is never useful here, so every term is the worst case.
+    """
+    return impact_speed_estimate(scene)[0]
+
+
+# --------------------------------------------------------------------------- contact duration
+
+
+@dataclass(frozen=True)
+class ContactDurations:
+    """Shortest contact durations [s]; None when there is no such pair in the scene."""
+
+    particle_particle: Optional[float]
+    particle_wall: Optional[float]
+
+    @property
+    def shortest(self) -> Optional[float]:
+        values = [value for value in (self.particle_particle, self.particle_wall) if value is not None]
+        return min(values) if values else None
+
+
+def _hertz_duration(m_eff: float, r_eff: float, e_eff: float, speed: float) -> float:
+    return HERTZ_DURATION_FACTOR * (m_eff**2 / (r_eff * e_eff**2 * speed)) ** 0.2
+
+
+def _pairs(scene: Scene):
+    """(kind, material_a, material_b, m*, R*, E*) for the smallest particle of each pair of groups
+    and each group against each wall."""
+    smallest = []
+    for group in scene.particles:
+        material = scene.materials[group.material]
+        radius, _ = group_radius_range(group)
+        smallest.append((group.material, material, radius, _mass(material, radius)))
+    for i, (name_a, a, r_a, m_a) in enumerate(smallest):
+        for name_b, b, r_b, m_b in smallest[i:]:
+            yield ("particle_particle", name_a, name_b, m_a * m_b / (m_a + m_b), r_a * r_b / (r_a + r_b),
+                   _effective_modulus(a, b))
+        for wall in scene.walls:
+            w = scene.materials[wall.material]
+            # A flat wall: R = inf, m = inf, so R* = r and m* = m.
+            yield "particle_wall", name_a, wall.material, m_a, r_a, _effective_modulus(a, w)
+
+
+def hertz_contact_duration(scene: Scene, speed: float) -> ContactDurations:
+    """Shortest Hertz contact durations at impact speed `speed` [m/s].
+
+    t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5) over the pairs of each group's smallest
+    particle (particle-particle) and each group's smallest particle against each
+    wall (particle-wall: R* = r, m* = m).
+    """
+    if speed <= 0.0:
+        raise ValueError("impact speed must be positive")
+    best = {"particle_particle": None, "particle_wall": None}
+    for kind, _, _, m_eff, r_eff, e_eff in _pairs(scene):
+        value = _hertz_duration(m_eff, r_eff, e_eff, speed)
+        if best[kind] is None or value < best[kind]:
+            best[kind] = value
+    return ContactDurations(**best)
+
+
+def contact_duration(scene: Scene, speed: float) -> ContactDurations:
+    """Shortest contact durations for the model each pair uses.
+
+    Hertz-Mindlin: as `hertz_contact_duration`.  Linear spring-dashpot with
+    normal_stiffness k: the undamped half period pi sqrt(m*/k) (damping lengthens
+    it slightly).  Linear without normal_stiffness derives k so that the peak
+    overlap at the impact speed equals Hertz's, delta_max = (15 m* v^2 / (16 E* sqrt(R*)))^(2/5),
+    giving pi delta_max / v.
+    """
+    if speed <= 0.0:
+        raise ValueError("impact speed must be positive")
+    best = {"particle_particle": None, "particle_wall": None}
+    for kind, name_a, name_b, m_eff, r_eff, e_eff in _pairs(scene):
+        interaction = scene.interaction(name_a, name_b)
+        if interaction.model == "linear_spring_dashpot":
+            if interaction.normal_stiffness is not None:
+                value = math.pi * math.sqrt(m_eff / interaction.normal_stiffness)
+            else:
+                delta_max = (15.0 * m_eff * speed**2 / (16.0 * e_eff * math.sqrt(r_eff))) ** 0.4
+                value = math.pi * delta_max / speed
+        else:
+            value = _hertz_duration(m_eff, r_eff, e_eff, speed)
+        if best[kind] is None or value < best[kind]:
+            best[kind] = value
+    return ContactDurations(**best)
+
+
+# --------------------------------------------------------------------------- memory
+
+# Per particle, in bytes (see memory_estimate_bytes):
+_STATE_BYTES = 14 * 8 + 3 * 8  # x, v, w, f (3 each), radius, mass: 14 float64; id, material, cell: 3 x 8
+_NEIGHBOURS = 8  # half Verlet list entries per particle in a dense packing (12 contacts / 2 + skin)
+_LIST_ENTRY_BYTES = 4 + 8 + 3 * 8  # int32 partner index, int64 partner id, 3 float64 tangential history
+_LIST_OFFSET_BYTES = 8  # CSR row offset
+_OVERHEAD = 1.4  # ghosts, the history remap buffer at rebuild, sort scratch
+BYTES_PER_PARTICLE = int(
+    round(_OVERHEAD * (_STATE_BYTES + _NEIGHBOURS * _LIST_ENTRY_BYTES + _LIST_OFFSET_BYTES), -1)
+)  # 600
+
+
+def memory_estimate_bytes(scene: Scene) -> int:
+    """Estimated particle memory [bytes], summed over ranks.
+
+    bytes = N * 1.4 * (14 * 8 + 3 * 8 + 8 * (4 + 8 + 3 * 8) + 8) ~= N * 600:
+    state arrays of 14 float64 (position, velocity, angular velocity, force,
+    radius, mass... ) and 3 integers (8 bytes each) per particle, a half Verlet
+    list of ~8 entries per particle (int32 partner index, int64 partner id, three
+    float64 tangential-history components), its CSR offsets, and 40 % for ghosts,
+    the history remap at list rebuild and sort scratch.  Excludes the fixed cost of
+    the interpreter, numba and PETSc (~150-250 MB per rank) and any FEM mesh.
+    """
+    return particle_count(scene) * BYTES_PER_PARTICLE
+
+
+# --------------------------------------------------------------------------- warnings
+
+
+def _format_seconds(value: float) -> str:
+    return f"{value:.3g} s"
+
+
+def warnings(scene: Scene) -> List[str]:
+    """Plain-language warnings about accuracy or cost; an empty list when none.
+
+    Not errors: the scene runs, but probably not as intended.
+    """
+    found: List[str] = []
+    count = particle_count(scene)
+    if count == 0:
+        found.append("the scene has no particles")
+        return found
+    try:
+        dt = time_step(scene)
+    except SceneError:
+        return found
+    rayleigh = rayleigh_time(scene)
+    if scene.time.dt != "auto" and rayleigh is not None and dt > 0.3 * rayleigh:
+        found.append(
+            f"time.dt = {dt:.3g} s is {dt / rayleigh:.2f} x the Rayleigh time {rayleigh:.3g} s; above ~0.3 the "
+            f"explicit integration may be unstable (use dt: auto, or dt <= {0.2 * rayleigh:.3g} s)"
+        )
+    speed, _ = impact_speed_estimate(scene)
+    smallest_radius = min(group_radius_range(group)[0] for group in scene.particles)
+    if speed > 0.0:
+        durations = contact_duration(scene, speed)
+        shortest = durations.shortest
+        if shortest is not None and dt > shortest / DT_PER_CONTACT:
+            found.append(
+                f"dt = {dt:.3g} s resolves the shortest contact ({shortest:.3g} s at {speed:.3g} m/s) with only "
+                f"{shortest / dt:.1f} steps (want >= {DT_PER_CONTACT:.0f}): lower time.dt_factor or time.dt"
+            )
+        if speed * dt > MAX_STEP_TRAVEL * smallest_radius:
+            found.append(
+                f"at the impact speed {speed:.3g} m/s a particle moves {speed * dt / smallest_radius:.2f} radii per "
+                f"step (want <= {MAX_STEP_TRAVEL}): lower dt, or check the impact speed"
+            )
+    steps = scene.time.end / dt
+    every = scene.output.every
+    if every is not None and every > scene.time.end:
+        found.append(f"output.every = {every:g} s is longer than time.end = {scene.time.end:g} s: only the start is written")
+    if every is not None and every < dt:
+        found.append(f"output.every = {every:g} s is shorter than dt = {dt:.3g} s: one output per step")
+    if steps > 1e7:
+        found.append(f"{steps:.3g} steps to time.end: check time.end and dt")
+    skin = scene.neighbors.skin
+    if skin is not None and skin > 2.0 * smallest_radius:
+        found.append(
+            f"neighbors.skin = {skin:g} m is more than a particle diameter: the Verlet lists grow a lot "
+            "(cost ~ (r + skin)^3) for fewer rebuilds; 0.1-0.5 radius is usual"
+        )
+    if _norm(scene.gravity) > 0.0 and not any(_dot(w.normal, _up(scene)) > 1e-12 for w in scene.walls):
+        found.append("gravity is on but no wall faces upwards: the particles fall freely")
+    for index, group in enumerate(scene.particles):
+        _, largest = group_radius_range(group)
+        for wall in scene.walls:
+            outside = _points_behind_wall(group, wall, largest)
+            if outside:
+                found.append(
+                    f"particles[{index}] ({group.name}) starts partly behind or inside wall '{wall.name}' "
+                    f"(normal points into the domain): move the region or the wall"
+                )
+    return found
+
+
+def _points_behind_wall(group: ParticleGroupConfig, wall: WallConfig, radius: float) -> bool:
+    """True when some particle of the group can start touching or behind the plane wall."""
+    length = _norm(wall.normal)
+    normal = tuple(c / length for c in wall.normal)
+    insert = group.insert
+    if insert.kind == "list":
+        radii = insert.radii or [radius] * len(insert.positions or ())
+        return any(
+            _dot(normal, position) - _dot(normal, wall.point) < r for position, r in zip(insert.positions or (), radii)
+        )
+    # Region boxes bound the particles themselves (centres lie at least a radius inside).
+    return any(_dot(normal, corner) - _dot(normal, wall.point) < -1e-12 * max(1.0, abs(_dot(normal, corner)))
+               for corner in _group_points(group))
