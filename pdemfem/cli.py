@@ -1,0 +1,406 @@
+"""The `pdemfem` command.
+
+    pdemfem run scene.yaml [-o DIR] [--quiet] [--restart FILE] [--force]
+    pdemfem check scene.yaml [--strict]
+    pdemfem info
+    pdemfem plot OUTDIR [--quiet]
+
+Under MPI (``python -m pdemfem.launch -n 2 -- pdemfem run scene.yaml``) every rank
+runs the same command.  Errors:
+
+* a user error (`PdemfemError`: bad scene, mesh, checkpoint) is printed once, by
+  rank 0, as ``error: <message>`` on stderr, and every rank exits with the
+  error's exit code (2 for input errors) together -- no traceback.  Ranks
+  synchronise on a non-blocking barrier; a rank whose error the others do not
+  share within PDEMFEM_ERROR_SYNC_SECONDS (30 s) aborts the job instead of hanging.
+* any other exception on several ranks prints its traceback with the rank and
+  calls ``MPI.COMM_WORLD.Abort(1)``, so no rank waits forever.
+* nothing is created on disk before the scene is validated and built; an output
+  directory a failed `run` created during set-up is removed again.
+"""
+from __future__ import annotations
+
+import argparse
+import inspect
+import os
+import shutil
+import sys
+import time
+import traceback
+from pathlib import Path
+from typing import Callable, List, Optional
+
+import pdemfem  # noqa: F401  (sets PETSC_DIR and the MPI environment before mpi4py/petsc4py load)
+from pdemfem.errors import PdemfemError, SceneError
+
+__all__ = ["main", "build_parser"]
+
+ERROR_SYNC_SECONDS = float(os.environ.get("PDEMFEM_ERROR_SYNC_SECONDS", "30"))
+
+
+# --------------------------------------------------------------------------- parser
+
+
+def _launcher_rank() -> int:
+    """This process's rank from the launcher's environment (before MPI is initialised)."""
+    for variable in ("OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK", "MV2_COMM_WORLD_RANK", "SLURM_PROCID"):
+        value = os.environ.get(variable)
+        if value is not None and value.isdigit():
+            return int(value)
+    return 0
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that prints usage errors once under MPI (every rank exits 2)."""
+
+    def _print_message(self, message, file=None):
+        if _launcher_rank() == 0:
+            super()._print_message(message, file)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="pdemfem",
+        description="MPI-parallel coupled DEM/FEM solver. Under MPI: python -m pdemfem.launch -n 2 -- pdemfem ...",
+    )
+    parser.add_argument("--version", action="version", version=f"pdemfem {pdemfem.__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    commands.required = True
+
+    run = commands.add_parser("run", help="run a scene to time.end")
+    run.add_argument("scene", help="scene file (YAML)")
+    run.add_argument("-o", "--output", metavar="DIR", help="output directory (default: the scene's output.dir, "
+                     "relative to the scene file)")
+    run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    run.add_argument("--restart", metavar="FILE", help="continue from a checkpoint file")
+    run.add_argument("--force", action="store_true", help="allow writing into an existing output directory")
+    run.set_defaults(handler=_command_run)
+
+    check = commands.add_parser("check", help="validate a scene and print derived quantities (dt, contact duration, memory)")
+    check.add_argument("scene", help="scene file (YAML)")
+    check.add_argument("--strict", action="store_true", help="exit 1 when there are warnings")
+    check.set_defaults(handler=_command_check)
+
+    info = commands.add_parser("info", help="versions of Python, numpy, numba, PETSc, MPI; rank count; parallel HDF5")
+    info.set_defaults(handler=_command_info)
+
+    plot = commands.add_parser("plot", help="plot OUTDIR/history.csv into OUTDIR/plots/*.png")
+    plot.add_argument("outdir", help="a run's output directory")
+    plot.add_argument("--quiet", action="store_true", help="do not list the files written")
+    plot.set_defaults(handler=_command_plot)
+    return parser
+
+
+# --------------------------------------------------------------------------- entry point
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Run the command line; returns the exit code (the console script exits with it)."""
+    arguments = build_parser().parse_args(argv)
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    try:
+        return int(arguments.handler(arguments, comm) or 0)
+    except PdemfemError as error:
+        return _fail_together(comm, error)
+    except KeyboardInterrupt:
+        if comm.size > 1:
+            comm.Abort(130)
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception:
+        if comm.size > 1:
+            text = traceback.format_exc()
+            sys.stderr.write("".join(f"[rank {comm.rank}] {line}\n" for line in text.rstrip().splitlines()))
+            sys.stderr.flush()
+            comm.Abort(1)
+        raise
+
+
+def _fail_together(comm, error: PdemfemError) -> int:
+    """Report a user error once and return its exit code on every rank (or abort, never hang)."""
+    cleanup = getattr(error, "cleanup_dir", None)
+    if comm.size == 1:
+        _remove_created_dir(cleanup)
+        _print_error(str(error))
+        return error.exit_code
+    request = comm.Ibarrier()
+    deadline = time.monotonic() + ERROR_SYNC_SECONDS
+    while not request.Test():
+        if time.monotonic() > deadline:
+            _print_error(f"(rank {comm.rank} of {comm.size}; the other ranks did not fail with it) {error}")
+            comm.Abort(error.exit_code)
+        time.sleep(0.002)
+    # Every rank holds a user error: rank 0 prints the distinct messages once.
+    messages = comm.gather(str(error), root=0)
+    codes = comm.allgather(error.exit_code)
+    if comm.rank == 0:
+        _remove_created_dir(cleanup)
+        distinct = list(dict.fromkeys(messages))
+        if len(distinct) == 1:
+            _print_error(distinct[0])
+        else:
+            for rank, message in enumerate(messages):
+                if message in distinct:
+                    _print_error(f"(rank {rank}) {message}")
+                    distinct.remove(message)
+    return max(codes)
+
+
+def _print_error(message: str) -> None:
+    sys.stdout.flush()
+    print(f"error: {message}", file=sys.stderr, flush=True)
+
+
+def _remove_created_dir(path: Optional[Path]) -> None:
+    if path is not None and path.is_dir():
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def _on_root(comm, function: Callable[[], object]):
+    """Run `function` on rank 0 only; every rank returns its result or raises its PdemfemError."""
+    outcome = None
+    if comm.rank == 0:
+        try:
+            outcome = ("ok", function())
+        except PdemfemError as error:
+            outcome = ("error", type(error).__name__, error.where, error.problem, error.fix, error.exit_code)
+    if comm.size > 1:
+        # Only plain data crosses ranks (never a pickled exception object).
+        shared = comm.bcast(outcome if outcome is None or outcome[0] == "error" else ("ok", None), root=0)
+        if comm.rank != 0:
+            outcome = shared
+    if outcome[0] == "error":
+        _, _, where, problem, fix, code = outcome
+        error = PdemfemError(where, problem, fix)
+        error.exit_code = code
+        raise error
+    return outcome[1]
+
+
+def _say(comm, text: str = "", quiet: bool = False) -> None:
+    if comm.rank == 0 and not quiet:
+        print(text, flush=True)
+
+
+# --------------------------------------------------------------------------- run
+
+
+def _command_run(arguments, comm) -> int:
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import load_scene, output_directory
+
+    # Validate first: nothing may be created on disk for an invalid scene.
+    scene, base_dir = load_scene(arguments.scene)
+    output_dir = output_directory(scene, base_dir, arguments.output)
+    existed = output_dir.exists()
+
+    from pdemfem.simulation import Simulation
+
+    options = {}
+    if arguments.restart is not None:
+        options["restart"] = arguments.restart
+    if arguments.force:
+        options["force"] = True
+    accepted = inspect.signature(Simulation.from_file).parameters
+    for name in options:
+        if name not in accepted and not any(p.kind is p.VAR_KEYWORD for p in accepted.values()):
+            raise PdemfemError(f"--{name}", "this version of pdemfem cannot do that yet",
+                               f"run without --{name}")
+    try:
+        simulation = Simulation.from_file(arguments.scene, comm=comm, output_dir=arguments.output, **options)
+    except PdemfemError as error:
+        if not existed:
+            error.cleanup_dir = output_dir
+        raise
+    if not arguments.quiet:
+        count = derived.particle_count(scene)
+        _say(comm, f"pdemfem run {arguments.scene}: {count} particles on {comm.size} rank(s), "
+                   f"dt = {simulation.dt:.3g} s, end = {scene.time.end:g} s, output: {simulation.output_dir}")
+    simulation.run(progress=not arguments.quiet)
+    _say(comm, f"results: {simulation.output_dir}", arguments.quiet)
+    return 0
+
+
+# --------------------------------------------------------------------------- check
+
+
+def _format_bytes(value: float) -> str:
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if value < 1000.0 or unit == "TB":
+            return f"{value:.3g} {unit}"
+        value /= 1000.0
+    return f"{value:.3g} TB"
+
+
+def check_report(path: str) -> tuple:
+    """(lines, warnings) for `pdemfem check`; raises SceneError for an invalid scene.
+
+    Builds the insertion as a run would, so overlapping list positions and regions
+    that cannot hold their count are reported here too.
+    """
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import load_scene, scene_hash
+
+    scene, base_dir = load_scene(path)
+    try:
+        from pdemfem.particles.insert import insert_particles
+    except ImportError:  # an engine without insertion: validate the schema only
+        insert_particles = None
+    if insert_particles is not None:
+        try:
+            inserted = insert_particles(scene)
+        except SceneError as error:
+            raise SceneError(f"{path}: {error.where}", error.problem, error.fix) from None
+        placed = len(inserted.radii)
+    else:
+        placed = None
+
+    counts = derived.group_counts(scene)
+    total = derived.particle_count(scene)
+    lines = [f"scene: {path} (physics hash {scene_hash(scene)[:12]})"]
+    groups = ", ".join(
+        f"{group.name}: {count} {group.material}, r = {_radius_text(derived.group_radius_range(group))}"
+        for group, count in zip(scene.particles, counts)
+    )
+    lines.append(f"particles: {total}" + (f" ({groups})" if groups else "")
+                 + ("" if placed is None or placed == total else f"; inserted {placed}"))
+    lines.append(f"walls: {len(scene.walls)}" + (f" ({', '.join(w.name for w in scene.walls)})" if scene.walls else ""))
+    models = sorted({interaction.model for interaction in scene.interactions.values()})
+    lines.append(f"materials: {', '.join(scene.materials)}; contact models: {', '.join(models)}")
+
+    rayleigh = derived.rayleigh_time(scene)
+    dt = derived.time_step(scene)
+    if scene.time.dt == "auto":
+        lines.append(f"time step: dt = {dt:.3g} s (auto: dt_factor {scene.time.dt_factor:g} x Rayleigh time {rayleigh:.3g} s)")
+    else:
+        rayleigh_text = f" = {dt / rayleigh:.3g} x Rayleigh time {rayleigh:.3g} s" if rayleigh else ""
+        lines.append(f"time step: dt = {dt:.3g} s (given{rayleigh_text})")
+    steps = scene.time.end / dt
+    lines.append(f"steps: {steps:.4g} to time.end = {scene.time.end:g} s")
+    if total:
+        speed, how = derived.impact_speed_estimate(scene)
+        lines.append(f"impact speed: {speed:.3g} m/s ({how})")
+        if speed > 0:
+            durations = derived.contact_duration(scene, speed)
+            parts = []
+            for label, value in (("particle-particle", durations.particle_particle),
+                                 ("particle-wall", durations.particle_wall)):
+                if value is not None:
+                    parts.append(f"{label} {value:.3g} s")
+            shortest = durations.shortest
+            lines.append(f"contact duration at {speed:.3g} m/s: {', '.join(parts)}; "
+                         f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact; "
+                         f"want >= {derived.DT_PER_CONTACT:.0f})")
+        memory = derived.memory_estimate_bytes(scene)
+        lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({derived.BYTES_PER_PARTICLE} B/particle, "
+                     f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
+        lines.append(f"work: {total * steps:.3g} particle-steps")
+    found = derived.warnings(scene)
+    return lines, found
+
+
+def _radius_text(bounds) -> str:
+    low, high = bounds
+    return f"{low:g} m" if low == high else f"{low:g}-{high:g} m"
+
+
+def _command_check(arguments, comm) -> int:
+    # Every rank parses and builds the same scene (cheap), so errors are raised on
+    # all ranks together; only rank 0 prints.
+    lines, found = check_report(arguments.scene)
+    for line in lines:
+        _say(comm, line)
+    if found:
+        _say(comm, f"warnings ({len(found)}):")
+        for warning in found:
+            _say(comm, f"  - {warning}")
+    else:
+        _say(comm, "warnings: none")
+    _say(comm, "scene OK")
+    return 1 if (found and arguments.strict) else 0
+
+
+# --------------------------------------------------------------------------- info
+
+
+def info_lines(comm) -> tuple:
+    """([(name, value)], missing) describing the installation."""
+    import platform
+
+    rows = [("pdemfem", pdemfem.__version__), ("python", f"{platform.python_version()} ({sys.executable})")]
+    missing = []
+
+    def probe(name, function):
+        try:
+            rows.append((name, function()))
+        except Exception as error:  # report, do not crash: info is for diagnosing installs
+            rows.append((name, f"MISSING ({type(error).__name__}: {error})"))
+            missing.append(name)
+
+    def numpy_version():
+        import numpy
+
+        return numpy.__version__
+
+    def numba_version():
+        import numba
+
+        return numba.__version__
+
+    def petsc_version():
+        import petsc4py
+        from petsc4py import PETSc
+
+        major, minor, patch = PETSc.Sys.getVersion()
+        return f"{major}.{minor}.{patch} (petsc4py {petsc4py.__version__}, PETSC_DIR={os.environ.get('PETSC_DIR', '')})"
+
+    def mpi_version():
+        import mpi4py
+        from mpi4py import MPI
+
+        library = MPI.Get_library_version().strip().splitlines()[0].split(", ident")[0].rstrip(",")
+        major, minor = MPI.Get_version()
+        return f"{library} (MPI {major}.{minor}, mpi4py {mpi4py.__version__})"
+
+    def h5py_version():
+        import h5py
+
+        parallel = bool(h5py.get_config().mpi)
+        return f"{h5py.__version__} (HDF5 {h5py.version.hdf5_version}); MPI-parallel: {'yes' if parallel else 'NO'}"
+
+    probe("numpy", numpy_version)
+    probe("numba", numba_version)
+    probe("petsc", petsc_version)
+    probe("mpi", mpi_version)
+    rows.append(("ranks", str(comm.size)))
+    probe("h5py", h5py_version)
+    return rows, missing
+
+
+def _command_info(arguments, comm) -> int:
+    rows, missing = info_lines(comm)
+    width = max(len(name) for name, _ in rows)
+    for name, value in rows:
+        _say(comm, f"{name:<{width}}  {value}")
+    if missing:
+        raise PdemfemError("pdemfem info", f"missing: {', '.join(missing)}", "run `make install` (see README)")
+    return 0
+
+
+# --------------------------------------------------------------------------- plot
+
+
+def _command_plot(arguments, comm) -> int:
+    from pdemfem.plot import plot_history
+
+    written = _on_root(comm, lambda: [str(path) for path in plot_history(arguments.outdir)])
+    if written:
+        for path in written:
+            _say(comm, f"wrote {path}", arguments.quiet)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
