@@ -1,9 +1,11 @@
 """Half Verlet list in CSR form over cell-sorted particles, with history carry-over.
 
-A pair (i, j), i < j in the current order, is listed when the surfaces are
-closer than `skin`; the list stays valid until some particle has moved more
-than skin/2 (checked in the drift kernel).  Tangential history lives aligned
-with the list and is carried across a rebuild by the partners' global ids.
+Each pair within `skin` of touching is listed once (a half stencil of 13
+neighbouring cells plus the own cell); the list stays valid until some
+particle has moved more than skin/2 (checked in the drift kernel).  Tangential
+history lives aligned with the list and is carried across a rebuild through
+the sort permutation: the new pair (k, l) looks up the old pair of the same two
+particles, flipping the sign when the old pair was stored the other way round.
 """
 from __future__ import annotations
 
@@ -12,43 +14,82 @@ from numba import njit
 
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
 
+# The 13 "forward" neighbour cells: each unordered pair of distinct cells is visited once.
+_FORWARD_OFFSETS = np.array(
+    [(dx, dy, dz) for dz in (-1, 0, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1)
+     if dz > 0 or (dz == 0 and dy > 0) or (dz == 0 and dy == 0 and dx > 0)],
+    dtype=np.int64,
+)
+
 
 @njit(cache=True)
-def _count_or_fill(positions, radii, skin, cell_of, starts, dimensions, offsets, partners, fill):
+def _fill_pairs(positions, radii, skin, cell_of, starts, dimensions, forward_offsets, offsets, partners):
+    """Write partners row by row; returns the number of pairs (may exceed the capacity)."""
     count = positions.shape[0]
+    capacity = partners.shape[0]
     nx, ny, nz = dimensions[0], dimensions[1], dimensions[2]
+    written = 0
     for i in range(count):
+        offsets[i] = written
         cell = cell_of[i]
         cx = cell % nx
         cy = (cell // nx) % ny
         cz = cell // (nx * ny)
-        written = 0
-        for dz in range(-1, 2):
-            z = cz + dz
-            if z < 0 or z >= nz:
+        xi = positions[i, 0]
+        yi = positions[i, 1]
+        zi = positions[i, 2]
+        reach = radii[i] + skin
+        # Own cell: later particles only.
+        for j in range(i + 1, starts[cell + 1]):
+            dx = xi - positions[j, 0]
+            dy = yi - positions[j, 1]
+            dz = zi - positions[j, 2]
+            cutoff = reach + radii[j]
+            if dx * dx + dy * dy + dz * dz < cutoff * cutoff:
+                if written < capacity:
+                    partners[written] = j
+                written += 1
+        for k in range(forward_offsets.shape[0]):
+            x = cx + forward_offsets[k, 0]
+            y = cy + forward_offsets[k, 1]
+            z = cz + forward_offsets[k, 2]
+            if x < 0 or y < 0 or z < 0 or x >= nx or y >= ny or z >= nz:
                 continue
-            for dy in range(-1, 2):
-                y = cy + dy
-                if y < 0 or y >= ny:
-                    continue
-                for dx in range(-1, 2):
-                    x = cx + dx
-                    if x < 0 or x >= nx:
-                        continue
-                    neighbour_cell = x + nx * (y + ny * z)
-                    for j in range(starts[neighbour_cell], starts[neighbour_cell + 1]):
-                        if j <= i:
-                            continue
-                        ddx = positions[i, 0] - positions[j, 0]
-                        ddy = positions[i, 1] - positions[j, 1]
-                        ddz = positions[i, 2] - positions[j, 2]
-                        cutoff = radii[i] + radii[j] + skin
-                        if ddx * ddx + ddy * ddy + ddz * ddz < cutoff * cutoff:
-                            if fill:
-                                partners[offsets[i] + written] = j
-                            written += 1
-        if not fill:
-            offsets[i + 1] = written
+            neighbour_cell = x + nx * (y + ny * z)
+            for j in range(starts[neighbour_cell], starts[neighbour_cell + 1]):
+                dx = xi - positions[j, 0]
+                dy = yi - positions[j, 1]
+                dz = zi - positions[j, 2]
+                cutoff = reach + radii[j]
+                if dx * dx + dy * dy + dz * dz < cutoff * cutoff:
+                    if written < capacity:
+                        partners[written] = j
+                    written += 1
+    offsets[count] = written
+    return written
+
+
+@njit(cache=True)
+def _carry_history(new_offsets, new_partners, new_history, old_offsets, old_partners, old_history, old_index):
+    """Copy each surviving pair's tangential spring into the new list (old_index: new -> old)."""
+    for k in range(new_offsets.shape[0] - 1):
+        a = old_index[k]
+        for row in range(new_offsets[k], new_offsets[k + 1]):
+            b = old_index[new_partners[row]]
+            found = False
+            for old_row in range(old_offsets[a], old_offsets[a + 1]):
+                if old_partners[old_row] == b:
+                    for axis in range(3):
+                        new_history[row, axis] = old_history[old_row, axis]
+                    found = True
+                    break
+            if not found:
+                # Stored from b's side: xi is the relative displacement, so it flips sign.
+                for old_row in range(old_offsets[b], old_offsets[b + 1]):
+                    if old_partners[old_row] == a:
+                        for axis in range(3):
+                            new_history[row, axis] = -old_history[old_row, axis]
+                        break
 
 
 class VerletList:
@@ -67,11 +108,8 @@ class VerletList:
     def rebuild(self, state, skin: float) -> None:
         """Sort particles by cell, rebuild the list, carry tangential history over."""
         count = state.count
-        old_keys, old_history = self._active_history(state.ids)
         if count == 0:
-            self.offsets = np.zeros(1, dtype=np.int64)
-            self.partners = np.zeros(0, dtype=np.int32)
-            self.history = np.zeros((0, 3))
+            self.__init__()
             return
         cell_size = 2.0 * float(state.radii.max()) + skin
         lower, cell_size, dimensions = cell_grid(state.positions, cell_size)
@@ -80,50 +118,19 @@ class VerletList:
         state.reorder(permutation)
         cells = np.ascontiguousarray(cells[permutation])
         starts = cell_starts(cells, int(np.prod(dimensions)))
-        offsets = np.zeros(count + 1, dtype=np.int64)
-        partners = np.zeros(0, dtype=np.int32)
-        _count_or_fill(state.positions, state.radii, skin, cells, starts, dimensions, offsets, partners, False)
-        np.cumsum(offsets, out=offsets)
-        partners = np.empty(offsets[-1], dtype=np.int32)
-        _count_or_fill(state.positions, state.radii, skin, cells, starts, dimensions, offsets, partners, True)
-        self.offsets = offsets
-        self.partners = partners
-        self.history = np.zeros((len(partners), 3))
-        self._restore_history(state.ids, old_keys, old_history)
+        offsets = np.empty(count + 1, dtype=np.int64)
+        # One pass when the capacity guess (last size + margin) suffices, two otherwise.
+        partners = np.empty(int(1.25 * self.pair_count) + 4 * count, dtype=np.int32)
+        needed = _fill_pairs(state.positions, state.radii, skin, cells, starts, dimensions, _FORWARD_OFFSETS,
+                             offsets, partners)
+        if needed > len(partners):
+            partners = np.empty(needed, dtype=np.int32)
+            _fill_pairs(state.positions, state.radii, skin, cells, starts, dimensions, _FORWARD_OFFSETS,
+                        offsets, partners)
+        partners = partners[:needed].copy()
+        history = np.zeros((needed, 3))
+        if self.pair_count and len(self.offsets) == count + 1:
+            _carry_history(offsets, partners, history, self.offsets, self.partners, self.history, permutation)
+        self.offsets, self.partners, self.history = offsets, partners, history
         state.positions_at_build[:] = state.positions
         self.builds += 1
-
-    def _pair_ids(self, ids):
-        first = np.repeat(ids, np.diff(self.offsets))
-        second = ids[self.partners]
-        return first, second
-
-    def _active_history(self, ids):
-        """Keys (lower id, higher id) and history oriented for the lower id, of springs in use."""
-        if self.pair_count == 0 or len(self.offsets) != len(ids) + 1:
-            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-        active = np.any(self.history != 0.0, axis=1)
-        first, second = self._pair_ids(ids)
-        first, second, history = first[active], second[active], self.history[active]
-        # xi is i's displacement relative to j: it flips sign with the orientation.
-        flip = first > second
-        history = np.where(flip[:, None], -history, history)
-        keys = _pair_keys(np.minimum(first, second), np.maximum(first, second))
-        order = np.argsort(keys)
-        return keys[order], history[order]
-
-    def _restore_history(self, ids, old_keys, old_history):
-        if len(old_keys) == 0 or self.pair_count == 0:
-            return
-        first, second = self._pair_ids(ids)
-        keys = _pair_keys(np.minimum(first, second), np.maximum(first, second))
-        position = np.searchsorted(old_keys, keys)
-        position = np.minimum(position, len(old_keys) - 1)
-        found = old_keys[position] == keys
-        sign = np.where(first > second, -1.0, 1.0)
-        self.history[found] = old_history[position[found]] * sign[found, None]
-
-
-def _pair_keys(lower_ids, higher_ids):
-    # Ids are below 2^31 per design (global particle counts); the key is unique.
-    return lower_ids.astype(np.int64) * np.int64(2**31) + higher_ids.astype(np.int64)
