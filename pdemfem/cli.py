@@ -179,6 +179,16 @@ def _on_root(comm, function: Callable[[], object]):
     return outcome[1]
 
 
+def _name_the_file(error: PdemfemError, path) -> PdemfemError:
+    """A SceneError raised while building names only its key path; prefix the scene file."""
+    label = str(path)
+    if isinstance(error, SceneError) and not error.where.startswith(label):
+        located = SceneError(f"{label}: {error.where}", error.problem, error.fix)
+        located.exit_code = error.exit_code
+        return located
+    return error
+
+
 def _say(comm, text: str = "", quiet: bool = False) -> None:
     if comm.rank == 0 and not quiet:
         print(text, flush=True)
@@ -211,9 +221,10 @@ def _command_run(arguments, comm) -> int:
     try:
         simulation = Simulation.from_file(arguments.scene, comm=comm, output_dir=arguments.output, **options)
     except PdemfemError as error:
+        located = _name_the_file(error, arguments.scene)
         if not existed:
-            error.cleanup_dir = output_dir
-        raise
+            located.cleanup_dir = output_dir
+        raise located from None
     if not arguments.quiet:
         count = derived.particle_count(scene)
         _say(comm, f"pdemfem run {arguments.scene}: {count} particles on {comm.size} rank(s), "
@@ -252,7 +263,7 @@ def check_report(path: str) -> tuple:
         try:
             inserted = insert_particles(scene)
         except SceneError as error:
-            raise SceneError(f"{path}: {error.where}", error.problem, error.fix) from None
+            raise _name_the_file(error, path) from None
         placed = len(inserted.radii)
     else:
         placed = None

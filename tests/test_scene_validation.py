@@ -1,0 +1,357 @@
+"""Scene validation, loading and derived quantities (pdemfem.scene).
+
+Every bad-scene class of issue 3 must give ONE SceneError (exit code 2) whose
+message names the key path and the fix.  The classes detected only when the
+particles are built (overlapping list insertions, an insertion that cannot place
+its count) are tested through `pdemfem check` / `pdemfem run` in test_cli.py.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+
+import pytest
+
+from pdemfem.errors import SceneError
+from pdemfem.scene import derived
+from pdemfem.scene.loader import load_scene, output_directory, resolve_path, scene_hash
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def base_scene() -> dict:
+    return {
+        "time": {"end": 0.01, "dt": "auto", "dt_factor": 0.2},
+        "gravity": [0, 0, -9.81],
+        "materials": {"glass": {"density": 2500, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3}},
+        "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.5}},
+        "particles": [
+            {
+                "name": "grains",
+                "material": "glass",
+                "radius": 0.001,
+                "insert": {"kind": "lattice", "region": {"box": [[0, 0, 0], [0.05, 0.05, 0.1]]}, "count": 100},
+            }
+        ],
+        "walls": [{"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1], "material": "glass"}],
+        "output": {"dir": "out", "every": 1.0e-3},
+    }
+
+
+def modified(change) -> dict:
+    scene = base_scene()
+    change(scene)
+    return scene
+
+
+def scene_error(data) -> SceneError:
+    with pytest.raises(SceneError) as caught:
+        load_scene(data)
+    return caught.value
+
+
+def test_valid_scene_loads_with_defaults_and_base_dir(tmp_path):
+    scene, base_dir = load_scene(base_scene(), base_dir=tmp_path)
+    assert base_dir == tmp_path.resolve()
+    assert scene.particles[0].insert.count == 100
+    assert scene.neighbors.skin is None  # default: 0.3 * smallest radius, chosen by the engine
+    assert scene.interaction("glass", "glass").restitution == 0.5
+
+
+# (change, key path the message must name, fragment of the problem, fragment of the fix)
+BAD_SCENES = {
+    "misspelt key": (
+        lambda s: s["particles"][0]["insert"].update(cuont=s["particles"][0]["insert"].pop("count")),
+        "particles[0].insert.cuont", "unknown key 'cuont'", "did you mean 'count'?",
+    ),
+    "misspelt required key": (
+        lambda s: s.update(tme=s.pop("time")),
+        "tme", "unknown key 'tme' (and the required key 'time' is missing)", "rename 'tme' to 'time'",
+    ),
+    "unknown key": (
+        lambda s: s["materials"]["glass"].update(youngs_modulos=1e6),
+        "materials.glass.youngs_modulos", "unknown key", "did you mean 'youngs_modulus'?",
+    ),
+    "unknown top-level key": (
+        lambda s: s.update(gravty=[0, 0, -9.81]),
+        "gravty", "unknown key", "did you mean 'gravity'?",
+    ),
+    "wrong type": (
+        lambda s: s["materials"]["glass"].update(youngs_modulus="stiff"),
+        "materials.glass.youngs_modulus", "expected a number, got 'stiff'", "as a number",
+    ),
+    "wrong type (integer)": (
+        lambda s: s["particles"][0]["insert"].update(count=12.5),
+        "particles[0].insert.count", "expected a whole number (integer)", "as a whole number",
+    ),
+    "missing material": (
+        lambda s: s["particles"][0].update(material="steel"),
+        "particles[0].material", "unknown material 'steel'", "define it under materials",
+    ),
+    "missing materials section": (
+        lambda s: s.pop("materials"),
+        "materials", "required key 'materials' is missing", "add materials: {glass: {density",
+    ),
+    "negative radius": (
+        lambda s: s["particles"][0].update(radius=-0.001),
+        "particles[0].radius", "must be > 0, got -0.001", "radius must be positive",
+    ),
+    "radius spread reversed": (
+        lambda s: s["particles"][0].update(radius={"min": 0.002, "max": 0.001}),
+        "particles[0].radius", "smaller than min", "swap them",
+    ),
+    "interaction with unknown material": (
+        lambda s: s["interactions"].update({"glass-steel": {"restitution": 0.3}}),
+        "interactions.glass-steel", "known materials", "docs/scene.md",
+    ),
+    "wall with unknown material": (
+        lambda s: s["walls"][0].update(material="rubber"),
+        "walls[0].material", "unknown material 'rubber'", "define it under materials",
+    ),
+    "bad choice": (
+        lambda s: s["interactions"]["default"].update(model="hertz"),
+        "interactions.default.model", "'hertz' (text) is not a valid choice", "did you mean 'hertz_mindlin'?",
+    ),
+    "dt neither number nor auto": (
+        lambda s: s["time"].update(dt="fast"),
+        "time.dt", "expected a number or 'auto'", "time.dt",
+    ),
+    "short vector": (
+        lambda s: s.update(gravity=[0, -9.81]),
+        "gravity", "too few values", "[x, y, z]",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_SCENES))
+def test_bad_scene_gives_one_error_naming_key_and_fix(case):
+    change, key, problem, fix = BAD_SCENES[case]
+    error = scene_error(modified(change))
+    assert error.exit_code == 2
+    assert len(error.problems) == 1, error.problems
+    message = str(error)
+    assert f"<scene dict>: {key}: " in message, message
+    assert problem in message, message
+    assert "fix: " in message and fix in message.split("fix: ", 1)[1], message
+    assert "Traceback" not in message and "pydantic" not in message
+
+
+def test_unknown_key_lists_valid_keys():
+    error = scene_error(modified(lambda s: s["walls"][0].update(colour="red")))
+    assert error.problems[0]["key"] == "walls[0].colour"
+    # No close match: the fix lists what is valid there.
+    assert "valid keys here: name, kind, material, point, normal, velocity" in error.problems[0]["fix"]
+
+
+def test_several_problems_each_on_its_own_line():
+    def change(scene):
+        scene["materials"]["glass"]["density"] = "heavy"
+        scene["particles"][0]["radius"] = -1.0
+        scene["time"]["ennd"] = 1.0
+
+    error = scene_error(modified(change))
+    message = str(error)
+    assert "3 problems in the scene" in message
+    keys = {problem["key"] for problem in error.problems}
+    assert keys == {"materials.glass.density", "particles[0].radius", "time.ennd"}
+    for key in keys:
+        assert sum(line.strip().startswith(f"- {key}: ") for line in message.splitlines()) == 1, message
+
+
+def write(tmp_path: Path, name: str, text: str) -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+GOOD_YAML = """\
+time: {end: 0.01}
+materials:
+  glass: {density: 2500, youngs_modulus: 5.0e6, poisson_ratio: 0.3}
+particles:
+  - name: grains
+    material: glass
+    radius: 0.001
+    insert:
+      kind: lattice
+      region: {box: [[0, 0, 0], [0.02, 0.02, 0.02]]}
+      count: 27
+walls:
+  - {name: floor, kind: plane, point: [0, 0, 0], normal: [0, 0, 1], material: glass}
+"""
+
+
+def test_file_errors_name_file_and_line(tmp_path):
+    path = write(tmp_path, "scene.yaml", GOOD_YAML.replace("count: 27", "count: many"))
+    error = scene_error(path)
+    assert str(error).startswith(f"{path}: line 11: particles[0].insert.count: expected an integer")
+
+
+def test_yaml_syntax_error_names_file_and_line(tmp_path):
+    path = write(tmp_path, "broken.yaml", GOOD_YAML.replace("radius: 0.001", "radius 0.001\n    : x"))
+    error = scene_error(path)
+    assert str(error).startswith(f"{path}, line 8, column"), str(error)
+    assert "YAML syntax error" in str(error)
+
+
+def test_duplicate_yaml_key_is_an_error(tmp_path):
+    path = write(tmp_path, "dup.yaml", GOOD_YAML + "time: {end: 0.02}\n")
+    error = scene_error(path)
+    assert "key 'time' appears twice (lines 1 and 14)" in str(error)
+
+
+def test_yaml_cannot_run_code(tmp_path):
+    marker = tmp_path / "pwned"
+    path = write(tmp_path, "evil.yaml", f'time: !!python/object/apply:os.system ["touch {marker}"]\n')
+    error = scene_error(path)
+    assert "YAML tag not allowed" in str(error)
+    assert not marker.exists()
+
+
+def test_missing_file_and_non_mapping(tmp_path):
+    assert "scene file not found" in str(scene_error(tmp_path / "nope.yaml"))
+    assert "must be a mapping" in str(scene_error(write(tmp_path, "list.yaml", "- a\n- b\n")))
+    assert "the scene is empty" in str(scene_error(write(tmp_path, "empty.yaml", "")))
+
+
+def test_paths_resolve_relative_to_the_scene_file(tmp_path, monkeypatch):
+    folder = tmp_path / "scenes"
+    folder.mkdir()
+    path = write(folder, "scene.yaml", GOOD_YAML + "output: {dir: results}\n")
+    monkeypatch.chdir(tmp_path)
+    scene, base_dir = load_scene("scenes/scene.yaml")
+    assert base_dir == folder.resolve()
+    assert resolve_path(base_dir, "meshes/beam.msh") == folder.resolve() / "meshes" / "beam.msh"
+    assert resolve_path(base_dir, "/abs/beam.msh") == Path("/abs/beam.msh")
+    assert output_directory(scene, base_dir) == folder.resolve() / "results"
+    # -o on the command line is relative to the current directory.
+    assert output_directory(scene, base_dir, "elsewhere") == tmp_path.resolve() / "elsewhere"
+    assert path.exists()
+
+
+def test_scene_hash_covers_physics_only():
+    reference = scene_hash(load_scene(base_scene())[0])
+    # Key order and spelled-out defaults do not matter.
+    reordered = dict(reversed(list(base_scene().items())))
+    reordered["neighbors"] = {"skin": None}
+    assert scene_hash(load_scene(reordered)[0]) == reference
+    # End time, output and checkpoint settings are not physics.
+    assert scene_hash(modified(lambda s: s["time"].update(end=5.0))) == reference
+    assert scene_hash(modified(lambda s: s.update(output={"dir": "x", "every": 0.5}))) == reference
+    # Physics is.
+    assert scene_hash(modified(lambda s: s["materials"]["glass"].update(density=2600))) != reference
+    assert scene_hash(modified(lambda s: s["time"].update(dt_factor=0.1))) != reference
+    assert len(reference) == 64
+
+
+# --------------------------------------------------------------------------- derived quantities
+
+
+def test_rayleigh_time_and_time_step():
+    scene, _ = load_scene(base_scene())
+    # r = 1 mm glass: G = 5e6 / 2.6, T_R = pi r sqrt(rho/G) / (0.1631*0.3 + 0.8766), by hand:
+    shear = 5.0e6 / 2.6
+    expected = math.pi * 1e-3 * math.sqrt(2500 / shear) / 0.92553
+    assert derived.rayleigh_time(scene) == pytest.approx(expected, rel=1e-12)
+    assert expected == pytest.approx(1.2239e-4, rel=1e-4)
+    assert derived.time_step(scene) == pytest.approx(0.2 * expected, rel=1e-12)
+    # A spread uses the smallest radius; an explicit dt is taken as given.
+    spread, _ = load_scene(modified(lambda s: s["particles"][0].update(radius={"min": 5e-4, "max": 1e-3})))
+    assert derived.rayleigh_time(spread) == pytest.approx(0.5 * expected, rel=1e-12)
+    fixed, _ = load_scene(modified(lambda s: s["time"].update(dt=1e-6)))
+    assert derived.time_step(fixed) == 1e-6
+
+
+def test_auto_dt_without_particles_is_a_scene_error():
+    scene, _ = load_scene(modified(lambda s: s.update(particles=[])))
+    with pytest.raises(SceneError, match="time.dt"):
+        derived.time_step(scene)
+
+
+def test_expected_impact_speed_rule():
+    def falling(scene):
+        scene["particles"][0]["insert"]["velocity"] = [0, 0, -1.0]
+        scene["walls"][0]["point"] = [0, 0, -0.02]  # floor 2 cm below the region bottom
+
+    scene, _ = load_scene(modified(falling))
+    # Region top z = 0.1 falls to the floor at z = -0.02: h = 0.12.
+    assert derived.fall_height(scene) == pytest.approx(0.12)
+    assert derived.expected_impact_speed(scene) == pytest.approx(1.0 + math.sqrt(2 * 9.81 * 0.12))
+    # A tilted floor counts where the particles are: the plane z = -0.1 x through the origin
+    # lies at z = -0.005 under the region's far edge x = 0.05, so the top corner there falls 0.105.
+    tilted, _ = load_scene(modified(lambda s: s["walls"][0].update(normal=[0.1, 0, 1])))
+    assert derived.fall_height(tilted) == pytest.approx(0.105, rel=1e-9)
+    # Without an upward-facing wall the particles only meet each other: the region's height span.
+    free, _ = load_scene(modified(lambda s: s.update(walls=[])))
+    assert derived.fall_height(free) == pytest.approx(0.1)
+    # A given value wins.
+    given, _ = load_scene(modified(lambda s: s["time"].update(expected_impact_speed=3.0)))
+    assert derived.expected_impact_speed(given) == 3.0
+
+
+def test_hertz_contact_duration_matches_the_formula():
+    def two_materials(scene):
+        scene["materials"]["steel"] = {"density": 7800, "youngs_modulus": 2.0e11, "poisson_ratio": 0.29}
+        scene["walls"][0]["material"] = "steel"
+
+    scene, _ = load_scene(modified(two_materials))
+    r, rho, E, nu, speed = 1e-3, 2500.0, 5.0e6, 0.3, 2.0
+    mass = 4.0 / 3.0 * math.pi * r**3 * rho
+    # Two equal glass spheres: m* = m/2, R* = r/2, E* = E / (2 (1 - nu^2)).
+    e_pair = E / (2 * (1 - nu**2))
+    pair = 2.868 * ((mass / 2) ** 2 / (r / 2 * e_pair**2 * speed)) ** 0.2
+    # Glass on a flat steel wall: m* = m, R* = r.
+    e_wall = 1.0 / ((1 - nu**2) / E + (1 - 0.29**2) / 2.0e11)
+    wall = 2.868 * (mass**2 / (r * e_wall**2 * speed)) ** 0.2
+    durations = derived.hertz_contact_duration(scene, speed)
+    assert durations.particle_particle == pytest.approx(pair, rel=1e-12)
+    assert durations.particle_wall == pytest.approx(wall, rel=1e-12)
+    assert durations.shortest == min(pair, wall)
+    # Hertz: t_c ~ v^(-1/5).
+    slower = derived.hertz_contact_duration(scene, speed / 32.0)
+    assert slower.particle_particle == pytest.approx(2.0 * pair, rel=1e-12)
+
+
+def test_linear_contact_duration_uses_the_stiffness():
+    scene, _ = load_scene(modified(
+        lambda s: s["interactions"].update(default={"model": "linear_spring_dashpot", "normal_stiffness": 1.0e3})
+    ))
+    mass = 4.0 / 3.0 * math.pi * 1e-9 * 2500.0
+    durations = derived.contact_duration(scene, 1.0)
+    assert durations.particle_particle == pytest.approx(math.pi * math.sqrt(mass / 2 / 1.0e3), rel=1e-12)
+    assert durations.particle_wall == pytest.approx(math.pi * math.sqrt(mass / 1.0e3), rel=1e-12)
+
+
+def test_counts_and_memory_estimate():
+    def two_groups(scene):
+        scene["particles"].append({
+            "name": "pair", "material": "glass", "radius": 0.001,
+            "insert": {"kind": "list", "positions": [[0.1, 0.1, 0.1], [0.2, 0.2, 0.2]]},
+        })
+
+    scene, _ = load_scene(modified(two_groups))
+    assert derived.group_counts(scene) == [100, 2]
+    assert derived.particle_count(scene) == 102
+    assert derived.memory_estimate_bytes(scene) == 102 * derived.BYTES_PER_PARTICLE
+    assert 400 <= derived.BYTES_PER_PARTICLE <= 1000  # issue 3 target: <= 1 KB per particle
+
+
+def test_warnings_flag_a_coarse_step():
+    scene, _ = load_scene(base_scene())
+    # dt = 0.2 T_R = 2.4e-5 s against a ~2e-4 s contact at ~1.4 m/s: fewer than 30 steps per contact.
+    assert any("steps (want >= 30)" in warning for warning in derived.warnings(scene))
+    fine, _ = load_scene(modified(lambda s: s["time"].update(dt_factor=0.05)))
+    assert not any("steps (want >= 30)" in warning for warning in derived.warnings(fine))
+    unstable, _ = load_scene(modified(lambda s: s["time"].update(dt=1e-4)))
+    assert any("may be unstable" in warning for warning in derived.warnings(unstable))
+    behind, _ = load_scene(modified(lambda s: s["walls"][0].update(point=[0, 0, 0.05])))
+    assert any("behind or inside wall 'floor'" in warning for warning in derived.warnings(behind))
+
+
+@pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.yaml")), ids=lambda p: p.name)
+def test_examples_are_valid_and_warning_free(path):
+    scene, base_dir = load_scene(path)
+    assert base_dir == EXAMPLES
+    assert derived.particle_count(scene) > 0
+    assert derived.warnings(scene) == []
