@@ -16,7 +16,7 @@ install:
 demo: install
 	@$(RUN) -n $(DEMO_RANKS) -- $(PYTHON) -m pdemfem.cli run $(DEMO_SCENE) -o $(DEMO_OUT)
 	@$(RUN) -- $(PYTHON) -m pdemfem.cli plot $(DEMO_OUT) --quiet
-	@echo "demo results: $(DEMO_OUT)/ (history.csv, plots/*.png, *.xdmf for ParaView)"
+	@echo "demo results: $(DEMO_OUT)/ (history.csv, plots/*.png)"
 
 test: install
 	@$(RUN) -- $(PYTHON) -m pytest -q $(PYTEST_ARGS)

@@ -96,7 +96,7 @@ class Simulation:
         self._open_outputs()
         if self.step_count == 0:
             self._write_history()
-        bar = _progress_bar(end, progress and self.comm.rank == 0)
+        bar = _progress_bar(total_steps, self.step_count, progress and self.comm.rank == 0)
         try:
             while self.step_count < total_steps:
                 chunk = min(steps_per_output - self.step_count % steps_per_output, total_steps - self.step_count)
@@ -104,7 +104,8 @@ class Simulation:
                 if self.step_count % steps_per_output == 0 or self.step_count == total_steps:
                     self._write_history()
                 if bar is not None:
-                    bar.update(min(self.time, end) - bar.n)
+                    bar.update(self.step_count - bar.n)
+                    bar.set_postfix_str(f"t = {self.time:.4g} / {end:.4g} s", refresh=False)
         finally:
             if bar is not None:
                 bar.close()
@@ -173,10 +174,10 @@ class Simulation:
         return self.particle_system.energies()
 
 
-def _progress_bar(end: float, enabled: bool):
+def _progress_bar(total_steps: int, done_steps: int, enabled: bool):
     if not enabled:
         return None
     from tqdm import tqdm
 
-    return tqdm(total=end, unit="s", unit_scale=False, desc="simulated time",
-                bar_format="{l_bar}{bar}| {n:.4g}/{total:.4g} s [{elapsed}<{remaining}, {rate_fmt}]")
+    return tqdm(total=total_steps, initial=done_steps, unit="step", unit_scale=True, desc="pdemfem",
+                mininterval=1.0)

@@ -53,7 +53,7 @@ class ParticleSystem:
         self.walls.work -= float(np.sum(self.walls.forces * self.walls.velocities)) * dt
 
     def _rebuild(self) -> None:
-        if self.comm.size > 1:
+        if self.comm.size > 1 and self.neighbors.builds > 0:
             self._share_history()
         self.neighbors.rebuild(self.state, self.skin)
 
