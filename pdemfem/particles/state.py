@@ -2,7 +2,10 @@
 
 Kernels read and write these arrays directly; nothing here holds scene objects.
 Every per-particle array is permuted together by `reorder` (cell sort on list
-rebuild), so adding a per-particle field means adding it to PER_PARTICLE_FIELDS.
+rebuild) and will travel with a particle when it migrates between ranks.  Core
+fields are listed in PER_PARTICLE_FIELDS; a module that needs its own
+per-particle state (e.g. mesh-wall contact history) registers it with
+`add_field` and reads it as `state.fields[name]`.
 """
 from __future__ import annotations
 
@@ -48,6 +51,14 @@ class ParticleState:
         self.positions_at_build = self.positions.copy()
         # Tangential spring of each particle against each analytic wall.
         self.wall_history = np.zeros((count, max(wall_count, 1), 3))
+        self.fields = {}
+
+    def add_field(self, name: str, tail_shape: tuple = (), dtype=np.float64, fill=0) -> np.ndarray:
+        """Register an extra per-particle array of shape (count, *tail_shape)."""
+        if name in self.fields:
+            raise ValueError(f"per-particle field '{name}' registered twice")
+        self.fields[name] = np.full((self.count, *tail_shape), fill, dtype=dtype)
+        return self.fields[name]
 
     @property
     def count(self) -> int:
@@ -57,6 +68,9 @@ class ParticleState:
         """Permute every per-particle array (e.g. into cell order)."""
         for name in PER_PARTICLE_FIELDS:
             setattr(self, name, np.ascontiguousarray(getattr(self, name)[permutation]))
+        for name, values in self.fields.items():
+            self.fields[name] = np.ascontiguousarray(values[permutation])
 
     def nbytes(self) -> int:
-        return sum(getattr(self, name).nbytes for name in PER_PARTICLE_FIELDS)
+        return (sum(getattr(self, name).nbytes for name in PER_PARTICLE_FIELDS)
+                + sum(values.nbytes for values in self.fields.values()))

@@ -16,7 +16,20 @@ from pdemfem.particles.integrate import drift, kick
 
 
 class ParticleSystem:
-    def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm):
+    """DEM state and step.
+
+    Other bodies the particles touch (mesh walls, cylinders, FE surfaces) plug in
+    as *contributors*: objects with
+      name                                   unique name (for wall_force lookups)
+      move(dt)                               advance the body's own kinematics before forces
+      add_forces(system, first, last)        add contact forces of particles [first, last) to
+                                             system.state.forces/torques; return (elastic, dissipated, contacts)
+      reduce(comm)                           sum the body's rank-local totals (called when comm.size > 1)
+    Their per-particle contact history lives in state.fields (see ParticleState.add_field),
+    so it is reordered and migrated with the particles.
+    """
+
+    def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm, contributors=()):
         self.state = state
         self.walls = walls
         self.tables = tables
@@ -25,6 +38,7 @@ class ParticleSystem:
         self.skin = float(skin)
         self.comm = comm
         self.neighbors = VerletList()
+        self.contributors = list(contributors)
         self.elastic_energy = 0.0
         self.dissipated_energy = 0.0
         self.contact_count = 0
@@ -44,6 +58,8 @@ class ParticleSystem:
              state.inverse_inertia, self.gravity, 0.5 * dt)
         largest_displacement_squared = drift(state.positions, state.velocities, dt, state.positions_at_build)
         self.walls.move(dt)
+        for contributor in self.contributors:
+            contributor.move(dt)
         if 4.0 * largest_displacement_squared > self.skin * self.skin:
             self._rebuild()
         self._compute_forces()
@@ -101,7 +117,14 @@ class ParticleSystem:
             elastic += wall_elastic
             dissipated += wall_dissipated
             contacts += wall_contacts
+        for contributor in self.contributors:
+            extra_elastic, extra_dissipated, extra_contacts = contributor.add_forces(self, first, last)
+            elastic += extra_elastic
+            dissipated += extra_dissipated
+            contacts += extra_contacts
         if self.comm.size > 1:
+            for contributor in self.contributors:
+                contributor.reduce(self.comm)
             self.comm.Allreduce(MPI.IN_PLACE, state.forces, op=MPI.SUM)
             self.comm.Allreduce(MPI.IN_PLACE, state.torques, op=MPI.SUM)
             if walls.count:
