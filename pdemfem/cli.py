@@ -181,9 +181,13 @@ def _on_root(comm, function: Callable[[], object]):
 
 def _name_the_file(error: PdemfemError, path) -> PdemfemError:
     """A SceneError raised while building names only its key path; prefix the scene file."""
+    from pdemfem.scene.loader import key_line
+
     label = str(path)
     if isinstance(error, SceneError) and not error.where.startswith(label):
-        located = SceneError(f"{label}: {error.where}", error.problem, error.fix)
+        line = key_line(path, error.where)
+        where = f"{label}: line {line}: {error.where}" if line is not None else f"{label}: {error.where}"
+        located = SceneError(where, error.problem, error.fix)
         located.exit_code = error.exit_code
         return located
     return error

@@ -37,6 +37,7 @@ __all__ = [
     "output_directory",
     "scene_hash",
     "format_key_path",
+    "key_line",
     "HASH_EXCLUDED_KEYS",
 ]
 
@@ -133,6 +134,16 @@ def scene_hash(scene: Union[Scene, Dict[str, Any]]) -> str:
             node.pop(last, None)
     text = json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=True)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def key_line(scene_file: Union[str, os.PathLike], key: str) -> Optional[int]:
+    """1-based line of a key path such as 'particles[0].insert.count' in a YAML scene file
+    (the deepest part of the path found), or None when the file cannot be read."""
+    try:
+        nodes = yaml.compose(Path(scene_file).read_text(encoding="utf-8"), Loader=yaml.SafeLoader)
+        return _line_of(nodes, _parse_key_path(key))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, ValueError):
+        return None
 
 
 def format_key_path(path: KeyPath) -> str:
