@@ -85,10 +85,10 @@ class ParticleSystem:
         history[:row_first] = 0.0
         history[row_last:] = 0.0
         self.comm.Allreduce(MPI.IN_PLACE, history, op=MPI.SUM)
-        wall_history = self.state.wall_history
-        wall_history[:first] = 0.0
-        wall_history[last:] = 0.0
-        self.comm.Allreduce(MPI.IN_PLACE, wall_history, op=MPI.SUM)
+        for per_particle in (self.state.wall_history, *self.state.fields.values()):
+            per_particle[:first] = 0
+            per_particle[last:] = 0
+            self.comm.Allreduce(MPI.IN_PLACE, per_particle, op=MPI.SUM)
 
     def _compute_forces(self) -> None:
         state, tables, walls, neighbors = self.state, self.tables, self.walls, self.neighbors
