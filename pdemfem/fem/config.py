@@ -1,0 +1,112 @@
+"""Scene keys of one deformable solid (one entry of the scene's `solids:` list).
+
+Key names are a public contract: add keys, never rename them.  The meaning and
+cost of every knob is documented in docs/fem.md.
+"""
+from __future__ import annotations
+
+from typing import Annotated, List, Literal, Optional, Tuple, Union
+
+from pydantic import Field, field_validator, model_validator
+
+from pdemfem.scene.schema import NonNegativeFloat, PositiveFloat, StrictModel, Vector3
+
+BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
+
+# A vector whose null components are left free: [0, null, null] is a roller
+# that holds x and lets y and z move.
+PartialVector3 = Tuple[Optional[float], Optional[float], Optional[float]]
+CellCount = Annotated[int, Field(gt=0)]
+
+
+class BoxMeshConfig(StrictModel):
+    """A box [[x0,y0,z0],[x1,y1,z1]] split into nx*ny*nz hexahedra of 6 tetrahedra each (gmsh)."""
+
+    box: Tuple[Vector3, Vector3]
+    cells: Tuple[CellCount, CellCount, CellCount]
+
+    @field_validator("box")
+    @classmethod
+    def _ordered(cls, box):
+        low, high = box
+        if any(h <= l for l, h in zip(low, high)):
+            raise ValueError("box must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] with every max > min")
+        return box
+
+
+class DampingConfig(StrictModel):
+    """Rayleigh damping C = alpha M + beta K."""
+
+    alpha: NonNegativeFloat = Field(0.0, description="mass-proportional coefficient [1/s]")
+    beta: NonNegativeFloat = Field(0.0, description="stiffness-proportional coefficient [s]")
+
+
+class PrescribedConfig(StrictModel):
+    """Prescribed motion of a group: constant velocity or constant displacement (null = free component)."""
+
+    group: str
+    velocity: Optional[PartialVector3] = None
+    displacement: Optional[PartialVector3] = None
+
+    @model_validator(mode="after")
+    def _one_kind(self):
+        if (self.velocity is None) == (self.displacement is None):
+            raise ValueError(f"prescribed group '{self.group}': give exactly one of velocity: [...] or displacement: [...]")
+        values = self.velocity if self.velocity is not None else self.displacement
+        if all(v is None for v in values):
+            raise ValueError(f"prescribed group '{self.group}': every component is null; prescribe at least one")
+        return self
+
+
+class TractionConfig(StrictModel):
+    """A uniform surface traction (force per area, global axes) [Pa] on a boundary group."""
+
+    group: str
+    traction: Vector3
+
+
+class PointForceConfig(StrictModel):
+    """A constant force [N] on the mesh node nearest to `point`."""
+
+    point: Vector3
+    force: Vector3
+
+
+class SolidConfig(StrictModel):
+    name: str
+    mesh: Union[str, BoxMeshConfig] = Field(
+        description="gmsh .msh (any meshio-readable tetrahedral mesh), relative to the scene file, or a generated box"
+    )
+    material: str
+    element: Literal["P1", "P2"] = "P1"
+    mass: Literal["lumped", "consistent"] = "lumped"
+    damping: DampingConfig = Field(default_factory=DampingConfig)
+    fixed: List[str] = Field(default_factory=list, description="groups (or box faces xmin..zmax) clamped in x, y and z")
+    prescribed: List[PrescribedConfig] = Field(default_factory=list)
+    contact: List[str] = Field(default_factory=list, description="surface groups that particles may touch")
+    tractions: List[TractionConfig] = Field(default_factory=list)
+    point_forces: List[PointForceConfig] = Field(default_factory=list)
+    initial_temperature: Optional[PositiveFloat] = Field(
+        None, description="uniform initial temperature [K]; default: the reference temperature (no thermal load)"
+    )
+    reference_temperature: Optional[PositiveFloat] = Field(
+        None, description="stress-free temperature T0 [K]; default: the initial temperature"
+    )
+
+    @model_validator(mode="after")
+    def _distinct_groups(self):
+        prescribed = [entry.group for entry in self.prescribed]
+        clash = sorted(set(self.fixed) & set(prescribed))
+        if clash:
+            raise ValueError(f"groups {clash} are both fixed and prescribed; keep each group in one list")
+        return self
+
+    def temperatures(self) -> Tuple[Optional[float], Optional[float]]:
+        """(initial, reference) temperatures with the documented defaults (None, None: no thermal load)."""
+        initial = self.initial_temperature
+        reference = self.reference_temperature
+        if initial is None:
+            initial = reference
+        if reference is None:
+            reference = initial
+        return initial, reference

@@ -1,0 +1,269 @@
+"""Numba kernels on flat arrays: element integrals, owned-row assembly, loads, stress, explicit update.
+
+Conventions: coords (n_local, 3), cells (n_cells, nen) local node numbers; rows
+with local number < n_owned are owned by this rank and are the only ones a
+kernel writes (halo cells supply the rest of an owned row's sum).  Elements
+are straight-sided: one Jacobian per cell.  Stress/strain in Voigt order
+xx, yy, zz, yz, xz, xy (engineering shear strains).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def cell_jacobian_inverse(coords, cells, c, jinv):
+    """Fill jinv (3,3) = dxi/dx of cell c; return det(dx/dxi) = 6 * volume."""
+    n0 = cells[c, 0]
+    j = np.empty((3, 3))
+    for k in range(3):
+        nk = cells[c, k + 1]
+        for d in range(3):
+            j[d, k] = coords[nk, d] - coords[n0, d]  # column k = x_k - x_0
+    det = (
+        j[0, 0] * (j[1, 1] * j[2, 2] - j[1, 2] * j[2, 1])
+        - j[0, 1] * (j[1, 0] * j[2, 2] - j[1, 2] * j[2, 0])
+        + j[0, 2] * (j[1, 0] * j[2, 1] - j[1, 1] * j[2, 0])
+    )
+    inv = 1.0 / det
+    jinv[0, 0] = (j[1, 1] * j[2, 2] - j[1, 2] * j[2, 1]) * inv
+    jinv[0, 1] = (j[0, 2] * j[2, 1] - j[0, 1] * j[2, 2]) * inv
+    jinv[0, 2] = (j[0, 1] * j[1, 2] - j[0, 2] * j[1, 1]) * inv
+    jinv[1, 0] = (j[1, 2] * j[2, 0] - j[1, 0] * j[2, 2]) * inv
+    jinv[1, 1] = (j[0, 0] * j[2, 2] - j[0, 2] * j[2, 0]) * inv
+    jinv[1, 2] = (j[0, 2] * j[1, 0] - j[0, 0] * j[1, 2]) * inv
+    jinv[2, 0] = (j[1, 0] * j[2, 1] - j[1, 1] * j[2, 0]) * inv
+    jinv[2, 1] = (j[0, 1] * j[2, 0] - j[0, 0] * j[2, 1]) * inv
+    jinv[2, 2] = (j[0, 0] * j[1, 1] - j[0, 1] * j[1, 0]) * inv
+    return det
+
+
+@njit(cache=True)
+def physical_gradients(ref_grads_q, jinv, out):
+    """out[a, i] = sum_k dN_a/dxi_k * dxi_k/dx_i for one quadrature point."""
+    nen = ref_grads_q.shape[0]
+    for a in range(nen):
+        for i in range(3):
+            s = 0.0
+            for k in range(3):
+                s += ref_grads_q[a, k] * jinv[k, i]
+            out[a, i] = s
+
+
+@njit(cache=True)
+def element_stiffness_mass(coords, cells, c, stiff_grads, stiff_weights, mass_values, mass_weights, lam, mu, rho, ke, me):
+    """Element stiffness ke (nen,nen,3,3) and scalar consistent mass me (nen,nen) of cell c; returns volume."""
+    nen = cells.shape[1]
+    jinv = np.empty((3, 3))
+    det = cell_jacobian_inverse(coords, cells, c, jinv)
+    g = np.empty((nen, 3))
+    ke[:] = 0.0
+    me[:] = 0.0
+    for q in range(stiff_weights.shape[0]):
+        physical_gradients(stiff_grads[q], jinv, g)
+        wq = stiff_weights[q] * det
+        for a in range(nen):
+            for b in range(nen):
+                dot = g[a, 0] * g[b, 0] + g[a, 1] * g[b, 1] + g[a, 2] * g[b, 2]
+                for i in range(3):
+                    for j in range(3):
+                        ke[a, b, i, j] += wq * (lam * g[a, i] * g[b, j] + mu * g[a, j] * g[b, i])
+                    ke[a, b, i, i] += wq * mu * dot
+    for q in range(mass_weights.shape[0]):
+        wq = mass_weights[q] * det * rho
+        for a in range(nen):
+            for b in range(nen):
+                me[a, b] += wq * mass_values[q, a] * mass_values[q, b]
+    return det / 6.0
+
+
+@njit(cache=True)
+def hrz_lumping(me, volume, rho, out):
+    """HRZ lumped masses of one element: diagonal of me scaled to the element mass (row sum for P1)."""
+    nen = me.shape[0]
+    trace = 0.0
+    for a in range(nen):
+        trace += me[a, a]
+    scale = rho * volume / trace
+    for a in range(nen):
+        out[a] = me[a, a] * scale
+
+
+@njit(cache=True)
+def _find(indices, start, end, value):
+    lo, hi = start, end - 1
+    while lo <= hi:
+        mid = (lo + hi) // 2
+        if indices[mid] < value:
+            lo = mid + 1
+        elif indices[mid] > value:
+            hi = mid - 1
+        else:
+            return mid
+    return -1
+
+
+@njit(cache=True)
+def assemble_owned_rows(coords, cells, n_owned, indptr, indices, stiff_grads, stiff_weights, mass_values, mass_weights,
+                        lam, mu, rho, k_values, m_values, lumped):
+    """Add every local cell's K (blocks 3x3) and consistent M (scalar) into the owned-row CSR; HRZ lumped mass too."""
+    nen = cells.shape[1]
+    ke = np.empty((nen, nen, 3, 3))
+    me = np.empty((nen, nen))
+    ml = np.empty(nen)
+    for c in range(cells.shape[0]):
+        volume = element_stiffness_mass(coords, cells, c, stiff_grads, stiff_weights, mass_values, mass_weights, lam, mu, rho, ke, me)
+        hrz_lumping(me, volume, rho, ml)
+        for a in range(nen):
+            row = cells[c, a]
+            if row >= n_owned:
+                continue
+            lumped[row] += ml[a]
+            for b in range(nen):
+                pos = _find(indices, indptr[row], indptr[row + 1], cells[c, b])
+                m_values[pos] += me[a, b]
+                for i in range(3):
+                    for j in range(3):
+                        k_values[pos, i, j] += ke[a, b, i, j]
+
+
+@njit(cache=True)
+def element_matrices(coords, cells, cell_ids, stiff_grads, stiff_weights, mass_values, mass_weights, lam, mu, rho, k_out, m_out, lumped_out):
+    """Dense element matrices of the given cells: k_out (m, 3nen, 3nen), m_out (m, nen, nen), lumped_out (m, nen)."""
+    nen = cells.shape[1]
+    ke = np.empty((nen, nen, 3, 3))
+    me = np.empty((nen, nen))
+    ml = np.empty(nen)
+    for e in range(cell_ids.shape[0]):
+        volume = element_stiffness_mass(coords, cells, cell_ids[e], stiff_grads, stiff_weights, mass_values, mass_weights, lam, mu, rho, ke, me)
+        hrz_lumping(me, volume, rho, ml)
+        for a in range(nen):
+            lumped_out[e, a] = ml[a]
+            for b in range(nen):
+                m_out[e, a, b] = me[a, b]
+                for i in range(3):
+                    for j in range(3):
+                        k_out[e, 3 * a + i, 3 * b + j] = ke[a, b, i, j]
+
+
+@njit(cache=True)
+def body_force_load(coords, cells, n_owned, mass_values, mass_weights, force_density, out):
+    """out[a] += int N_a * force_density dV over local cells, owned rows only (force_density = rho g)."""
+    nen = cells.shape[1]
+    jinv = np.empty((3, 3))
+    for c in range(cells.shape[0]):
+        det = cell_jacobian_inverse(coords, cells, c, jinv)
+        for a in range(nen):
+            row = cells[c, a]
+            if row >= n_owned:
+                continue
+            s = 0.0
+            for q in range(mass_weights.shape[0]):
+                s += mass_weights[q] * mass_values[q, a]
+            for d in range(3):
+                out[row, d] += s * det * force_density[d]
+
+
+@njit(cache=True)
+def thermal_load(coords, cells, n_owned, n_owned_cells, mass_values, mass_grads, mass_weights, delta_t, load_coefficient,
+                 energy_coefficient, out):
+    """out[a] += int load_coefficient * dT * grad N_a dV (owned rows); returns int energy_coefficient dT^2 dV (owned cells)."""
+    nen = cells.shape[1]
+    jinv = np.empty((3, 3))
+    g = np.empty((nen, 3))
+    energy = 0.0
+    for c in range(cells.shape[0]):
+        det = cell_jacobian_inverse(coords, cells, c, jinv)
+        for q in range(mass_weights.shape[0]):
+            t = 0.0
+            for a in range(nen):
+                t += mass_values[q, a] * delta_t[cells[c, a]]
+            wq = mass_weights[q] * det
+            if c < n_owned_cells:
+                energy += wq * energy_coefficient * t * t
+            if t == 0.0:
+                continue
+            physical_gradients(mass_grads[q], jinv, g)
+            for a in range(nen):
+                row = cells[c, a]
+                if row < n_owned:
+                    for d in range(3):
+                        out[row, d] += wq * load_coefficient * t * g[a, d]
+    return energy
+
+
+@njit(cache=True)
+def traction_load(coords, faces, n_owned, traction, out):
+    """Exact consistent load of a uniform traction: P1 faces give A/3 per corner, P2 faces A/3 per midside."""
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        e1 = coords[b] - coords[a]
+        e2 = coords[c] - coords[a]
+        nx = e1[1] * e2[2] - e1[2] * e2[1]
+        ny = e1[2] * e2[0] - e1[0] * e2[2]
+        nz = e1[0] * e2[1] - e1[1] * e2[0]
+        share = 0.5 * np.sqrt(nx * nx + ny * ny + nz * nz) / 3.0
+        first = 0 if faces.shape[1] == 3 else 3
+        for k in range(first, first + 3):
+            row = faces[f, k]
+            if row < n_owned:
+                for d in range(3):
+                    out[row, d] += share * traction[d]
+
+
+@njit(cache=True)
+def cell_stresses(coords, cells, n_cells, displacement, delta_t, centroid_grads, centroid_values, lam, mu, thermal_coefficient, out):
+    """Voigt stress at each owned cell's centroid: lam tr(eps) I + 2 mu eps - 3 K alpha dT I."""
+    nen = cells.shape[1]
+    jinv = np.empty((3, 3))
+    g = np.empty((nen, 3))
+    for c in range(n_cells):
+        cell_jacobian_inverse(coords, cells, c, jinv)
+        physical_gradients(centroid_grads, jinv, g)
+        grad_u = np.zeros((3, 3))
+        t = 0.0
+        for a in range(nen):
+            node = cells[c, a]
+            t += centroid_values[a] * delta_t[node]
+            for i in range(3):
+                for j in range(3):
+                    grad_u[i, j] += displacement[node, i] * g[a, j]
+        trace = grad_u[0, 0] + grad_u[1, 1] + grad_u[2, 2]
+        p = lam * trace - thermal_coefficient * t
+        out[c, 0] = p + 2.0 * mu * grad_u[0, 0]
+        out[c, 1] = p + 2.0 * mu * grad_u[1, 1]
+        out[c, 2] = p + 2.0 * mu * grad_u[2, 2]
+        out[c, 3] = mu * (grad_u[1, 2] + grad_u[2, 1])
+        out[c, 4] = mu * (grad_u[0, 2] + grad_u[2, 0])
+        out[c, 5] = mu * (grad_u[0, 1] + grad_u[1, 0])
+
+
+@njit(cache=True)
+def central_difference_update(u, v, acceleration, internal, load, inverse_mass, constrained, prescribed_velocity, dt, decay, gain, lumped):
+    """One explicit step on owned dofs (flat arrays); returns this rank's external work increment.
+
+    M a = load - internal at free dofs (a = (load - internal) * inverse_mass when lumped, else
+    `acceleration` holds the solve's result); v+ = decay * v + gain * dt * a; constrained dofs take
+    their prescribed velocity; u += dt * v+.  Work uses the midpoint displacement increment
+    dt (v- + v+)/2 with the applied load at free dofs and the support force (= internal, a = 0) at
+    constrained ones.
+    """
+    work = 0.0
+    for i in range(u.shape[0]):
+        if constrained[i]:
+            a = 0.0
+            v_new = prescribed_velocity[i]
+            force = internal[i]
+        else:
+            if lumped:
+                a = (load[i] - internal[i]) * inverse_mass[i]
+            else:
+                a = acceleration[i]
+            v_new = decay * v[i] + gain * dt * a
+            force = load[i]
+        acceleration[i] = a
+        work += force * 0.5 * dt * (v[i] + v_new)
+        v[i] = v_new
+        u[i] += dt * v_new
+    return work

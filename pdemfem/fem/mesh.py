@@ -1,0 +1,249 @@
+"""The global (serial) tetrahedral mesh: read with meshio or generate a box with gmsh, check, name groups.
+
+Runs on one rank (the partitioner distributes the result).  Groups are sets of
+boundary triangles given as corner triples oriented with the outward normal.
+Box faces xmin..zmax are available on every mesh as the boundary triangles lying
+on the bounding box's planes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pdemfem.errors import MeshError
+from pdemfem.fem.config import BOX_FACES, BoxMeshConfig
+
+# Faces of a positively oriented tetrahedron, each listed counter-clockwise seen from outside.
+OUTWARD_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int64)
+# A cell whose volume is below this fraction of (longest edge)^3 / 6 is degenerate.
+DEGENERATE_QUALITY = 1e-8
+
+
+@dataclass
+class GlobalMesh:
+    source: str  # the file (or box description) named in error messages
+    points: np.ndarray  # (n, 3) float64
+    tets: np.ndarray  # (nc, 4) int64 corner connectivity, positive volume
+    face_groups: dict = field(default_factory=dict)  # name -> (nf, 3) int64 outward-oriented corner triples
+
+    def group_faces(self, name: str) -> np.ndarray:
+        """The faces of a named group (file group first, then box face); MeshError if unknown."""
+        if name in self.face_groups:
+            return self.face_groups[name]
+        if name in BOX_FACES:
+            faces = box_face(self.points, boundary_faces(self.tets), name)
+            if len(faces) == 0:
+                raise MeshError(
+                    where=f"{self.source}: group '{name}'",
+                    problem="no boundary triangle lies on that face of the bounding box",
+                    fix="use a physical group name of the mesh instead",
+                )
+            return faces
+        raise MeshError(
+            where=f"{self.source}: group '{name}'",
+            problem=f"the mesh has no such group (groups: {sorted(self.face_groups)}; box faces: {list(BOX_FACES)})",
+            fix="add a 2-D physical group with this name in gmsh, or correct the name in the scene",
+        )
+
+
+def load_mesh(spec, base_dir: Path) -> GlobalMesh:
+    """A mesh from the scene's `mesh:` value (file path relative to base_dir, or BoxMeshConfig)."""
+    if isinstance(spec, BoxMeshConfig):
+        mesh = generate_box_mesh(spec)
+    else:
+        path = Path(spec)
+        if not path.is_absolute():
+            path = Path(base_dir) / path
+        mesh = read_mesh_file(path)
+    check_cells(mesh)
+    return mesh
+
+
+def generate_box_mesh(spec: BoxMeshConfig) -> GlobalMesh:
+    """Structured (transfinite) box: nx*ny*nz hexahedra split into 6 tetrahedra each, by gmsh."""
+    import gmsh
+
+    low, high = np.array(spec.box[0], float), np.array(spec.box[1], float)
+    initialized_here = not gmsh.isInitialized()
+    if initialized_here:
+        gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("pdemfem_box")
+        volume = gmsh.model.occ.addBox(*low, *(high - low))
+        gmsh.model.occ.synchronize()
+        for _, curve in gmsh.model.getEntities(1):
+            bounds = np.array(gmsh.model.getBoundingBox(1, curve))
+            axis = int(np.argmax(bounds[3:] - bounds[:3]))
+            gmsh.model.mesh.setTransfiniteCurve(curve, spec.cells[axis] + 1)
+        for _, surface in gmsh.model.getEntities(2):
+            gmsh.model.mesh.setTransfiniteSurface(surface)
+        gmsh.model.mesh.setTransfiniteVolume(volume)
+        gmsh.model.mesh.generate(3)
+        node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
+        _, _, element_nodes = gmsh.model.mesh.getElements(3, volume)
+        gmsh.model.remove()
+    finally:
+        if initialized_here:
+            gmsh.finalize()
+    order = np.argsort(node_tags)
+    points = coordinates.reshape(-1, 3)[order]
+    tets = np.searchsorted(node_tags[order], element_nodes[0]).reshape(-1, 4).astype(np.int64)
+    source = f"box {spec.box} cells {list(spec.cells)}"
+    return GlobalMesh(source=source, points=points, tets=tets)
+
+
+def read_mesh_file(path: Path) -> GlobalMesh:
+    """Tetrahedra and named triangle groups of a meshio-readable file (gmsh physical groups)."""
+    import meshio
+
+    source = str(path)
+    if not path.is_file():
+        raise MeshError(where=source, problem="file not found", fix="check the path (relative to the scene file)")
+    try:
+        data = meshio.read(path)
+    except Exception as exc:  # meshio raises many types for malformed files
+        raise MeshError(where=source, problem=f"cannot read the mesh: {exc}", fix="export it from gmsh as .msh (format 4.1 or 2.2)") from exc
+    tet_blocks = [block.data[:, :4] for block in data.cells if block.type in ("tetra", "tetra10")]
+    other_volume = sorted({block.type for block in data.cells if block.type in ("hexahedron", "wedge", "pyramid", "hexahedron20", "hexahedron27")})
+    if not tet_blocks:
+        problem = "the mesh has no volume cells (tetrahedra)"
+        if other_volume:
+            problem = f"the mesh's volume cells are {other_volume}; only tetrahedra are supported"
+        raise MeshError(where=source, problem=problem, fix="mesh the volume (gmsh: Mesh > 3D) with tetrahedra and save again")
+    tets = np.vstack(tet_blocks).astype(np.int64)
+    used = np.unique(tets)
+    renumber = np.full(len(data.points), -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    points = np.asarray(data.points, dtype=float)[used]
+    if points.shape[1] != 3:
+        raise MeshError(where=source, problem="points are not 3-D", fix="export a 3-D mesh")
+    tets = renumber[tets]
+    groups = {}
+    for name, triangles in _named_triangle_sets(data).items():
+        triangles = renumber[triangles]
+        if np.any(triangles < 0):
+            raise MeshError(
+                where=f"{source}: group '{name}'",
+                problem="some of its triangles use nodes that belong to no tetrahedron",
+                fix="make the group's surfaces part of the meshed volume's boundary",
+            )
+        groups[name] = triangles
+    mesh = GlobalMesh(source=source, points=points, tets=tets)
+    mesh.tets = _oriented_cells(mesh)
+    for name, triangles in groups.items():
+        mesh.face_groups[name] = orient_faces(mesh, triangles, name)
+    return mesh
+
+
+def _named_triangle_sets(data) -> dict:
+    """name -> (nf,3) node triples of 2-D groups, from gmsh physical names (or numeric tags)."""
+    names_by_tag = {}
+    for name, value in (data.field_data or {}).items():
+        value = np.atleast_1d(value)
+        if len(value) >= 2 and int(value[1]) == 2:
+            names_by_tag[int(value[0])] = name
+    found: dict = {}
+    physical = (data.cell_data or {}).get("gmsh:physical")
+    if physical is not None:
+        for block, tags in zip(data.cells, physical):
+            if block.type not in ("triangle", "triangle6"):
+                continue
+            for tag in np.unique(tags):
+                name = names_by_tag.get(int(tag), str(int(tag)))
+                found.setdefault(name, []).append(block.data[tags == tag, :3])
+    else:
+        for name, per_block in (data.cell_sets or {}).items():
+            for block, indices in zip(data.cells, per_block):
+                if block.type in ("triangle", "triangle6") and indices is not None and len(indices):
+                    found.setdefault(name, []).append(block.data[np.asarray(indices), :3])
+    return {name: np.vstack(parts).astype(np.int64) for name, parts in found.items()}
+
+
+def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    edges = points[tets[:, 1:]] - points[tets[:, [0]]]
+    return np.linalg.det(edges) / 6.0
+
+
+def _oriented_cells(mesh: GlobalMesh) -> np.ndarray:
+    """A file whose every cell is negatively oriented is a convention, not an error: flip them all."""
+    volumes = signed_volumes(mesh.points, mesh.tets)
+    if np.all(volumes < 0):
+        return mesh.tets[:, [0, 2, 1, 3]].copy()
+    return mesh.tets
+
+
+def check_cells(mesh: GlobalMesh) -> None:
+    """MeshError for degenerate (near-zero volume) or inverted (negative volume) cells."""
+    volumes = signed_volumes(mesh.points, mesh.tets)
+    corners = mesh.points[mesh.tets]
+    longest = np.zeros(len(mesh.tets))
+    for i in range(4):
+        for j in range(i + 1, 4):
+            longest = np.maximum(longest, np.linalg.norm(corners[:, i] - corners[:, j], axis=1))
+    quality = 6.0 * np.abs(volumes) / np.maximum(longest, np.finfo(float).tiny) ** 3
+    degenerate = np.flatnonzero(quality < DEGENERATE_QUALITY)
+    if len(degenerate):
+        raise MeshError(
+            where=f"{mesh.source}: cells {degenerate[:10].tolist()}{' ...' if len(degenerate) > 10 else ''}",
+            problem=f"{len(degenerate)} degenerate cell(s) with (near) zero volume (quality {quality[degenerate].min():.1e})",
+            fix="remesh; check for duplicate or collinear nodes",
+        )
+    inverted = np.flatnonzero(volumes < 0)
+    if len(inverted):
+        raise MeshError(
+            where=f"{mesh.source}: cells {inverted[:10].tolist()}{' ...' if len(inverted) > 10 else ''}",
+            problem=f"{len(inverted)} of {len(volumes)} cells are inverted (negative volume)",
+            fix="remesh, or repair the cells' node order (gmsh: Mesh > Reverse)",
+        )
+
+
+def all_cell_faces(tets: np.ndarray) -> np.ndarray:
+    """(4*nc, 3) outward-oriented faces of every cell."""
+    return tets[:, OUTWARD_FACES].reshape(-1, 3)
+
+
+def _face_keys(faces: np.ndarray, n_points: int) -> np.ndarray:
+    s = np.sort(faces, axis=1)
+    return (s[:, 0] * n_points + s[:, 1]) * n_points + s[:, 2]
+
+
+def boundary_faces(tets: np.ndarray) -> np.ndarray:
+    """Outward-oriented faces that belong to exactly one cell."""
+    faces = all_cell_faces(tets)
+    n = int(tets.max()) + 1
+    keys = _face_keys(faces, n)
+    _, first, counts = np.unique(keys, return_index=True, return_counts=True)
+    return faces[np.sort(first[counts == 1])]
+
+
+def orient_faces(mesh: GlobalMesh, triangles: np.ndarray, name: str) -> np.ndarray:
+    """Match triangles to cell faces and return them with the cell's outward orientation."""
+    faces = all_cell_faces(mesh.tets)
+    n = len(mesh.points)
+    keys = _face_keys(faces, n)
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    wanted = _face_keys(triangles, n)
+    where = np.searchsorted(sorted_keys, wanted)
+    where = np.minimum(where, len(sorted_keys) - 1)
+    missing = sorted_keys[where] != wanted
+    if np.any(missing):
+        raise MeshError(
+            where=f"{mesh.source}: group '{name}'",
+            problem=f"{int(missing.sum())} of its triangles are not faces of any tetrahedron",
+            fix="regenerate the mesh so surface and volume meshes are conforming",
+        )
+    return faces[order[where]]
+
+
+def box_face(points: np.ndarray, boundary: np.ndarray, name: str) -> np.ndarray:
+    """Boundary faces lying on the bounding-box plane `name` (xmin..zmax)."""
+    axis = "xyz".index(name[0])
+    low, high = points.min(axis=0), points.max(axis=0)
+    tolerance = 1e-9 * float(np.linalg.norm(high - low))
+    plane = low[axis] if name.endswith("min") else high[axis]
+    on_plane = np.all(np.abs(points[boundary][:, :, axis] - plane) <= tolerance, axis=1)
+    return boundary[on_plane]

@@ -1,0 +1,474 @@
+"""One deformable solid: built from its scene entry, advanced by the coupling loop.
+
+    solid = Solid(config, material, gravity=(0, 0, -9.81), comm=MPI.COMM_WORLD, base_dir=scene_dir)
+    solid.static_solve()                      # K u0 = b0, starts at rest in equilibrium
+    dt_max = solid.critical_time_step()       # proven bound (see stability.py)
+    solid.add_nodal_forces(nodes, forces)     # any rank, any node: particle contact forces
+    solid.step(dt)                            # one explicit central-difference step
+
+All methods are collective unless stated otherwise; nodal arrays hold the nodes
+this rank owns (global numbers solid.global_node_range), cell arrays the cells it owns.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from pdemfem.errors import MeshError, SolverError
+from pdemfem.fem import kernels
+from pdemfem.fem.assemble import assemble_operators, ghosted_vector, local_values
+from pdemfem.fem.config import SolidConfig
+from pdemfem.fem.elements import reference_element
+from pdemfem.fem.mesh import load_mesh
+from pdemfem.fem.partition import distribute_mesh
+from pdemfem.fem.stability import critical_step, largest_element_eigenvalue
+from pdemfem.fem.static import StaticResult, make_static_solver, solve_static
+from pdemfem.fem.surface import ContactSurface
+
+logger = logging.getLogger("pdemfem.fem")
+
+MASS_SOLVE_PREFIX = "fem_mass_"
+# Consistent-mass solve tolerance: relative error of the acceleration.  Central difference
+# already errs by ~(omega dt)^2/24 per step in phase; for the modes that carry the physics
+# (omega dt < 1e-2) that is ~1e-6, so 1e-8 keeps the solve below the integrator's own error.
+MASS_SOLVE_RTOL = 1e-8
+BLOWUP_CHECK_EVERY = 16  # steps between the (cheap, one norm) divergence checks
+
+
+def _sum(comm, value: float) -> float:
+    buffer = np.array([value], dtype=np.float64)
+    comm.Allreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)
+    return float(buffer[0])
+
+
+class Solid:
+    def __init__(self, config: SolidConfig, material, gravity=(0.0, 0.0, -9.81), comm=MPI.COMM_WORLD, base_dir=Path(".")):
+        self.config = config
+        self.material = material
+        self.comm = comm
+        self.name = config.name
+        E, nu = material.youngs_modulus, material.poisson_ratio
+        self.density = material.density
+        self.lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+        self.mu = E / (2.0 * (1.0 + nu))
+        bulk = self.lam + 2.0 * self.mu / 3.0
+        alpha_t = material.thermal_expansion
+        self._thermal_load_coefficient = 3.0 * bulk * alpha_t  # sigma_th = -3 K alpha dT I
+        self._thermal_energy_coefficient = 4.5 * bulk * alpha_t * alpha_t  # 1/2 eps_th : D : eps_th / dT^2
+        self.element = reference_element(config.element)
+        self.lumped = config.mass == "lumped"
+        self.damping_alpha, self.damping_beta = config.damping.alpha, config.damping.beta
+
+        groups = list(config.fixed) + [p.group for p in config.prescribed] + [t.group for t in config.tractions]
+        self.mesh = distribute_mesh(
+            comm, lambda: load_mesh(config.mesh, Path(base_dir)), config.element, groups, list(config.contact),
+            [p.point for p in config.point_forces],
+        )
+        mesh = self.mesh
+        self.n_owned_nodes = mesh.n_owned_nodes
+        self.global_node_range = mesh.node_range
+        self.n_global_nodes = mesh.n_global_nodes
+
+        operators = assemble_operators(comm, mesh, self.element, self.lam, self.mu, self.density, not self.lumped)
+        self.stiffness = operators.stiffness
+        self.consistent_mass = operators.consistent_mass
+        self.lumped_mass = operators.lumped_mass
+        self._inverse_lumped_mass = 1.0 / self.lumped_mass.getArray(readonly=True).copy()
+
+        self.displacement_vec = ghosted_vector(comm, mesh, 3)
+        self.velocity_vec = self.stiffness.createVecRight()  # v^{n+1/2}: the velocity over the last step
+        self.acceleration_vec = self.stiffness.createVecRight()
+        self.internal_force_vec = self.stiffness.createVecRight()  # K (u + beta v) at the last force evaluation
+        self.load_vec = self.stiffness.createVecRight()  # total applied load at the last force evaluation
+        self.constant_load_vec = self.stiffness.createVecRight()  # gravity + tractions + point forces
+        self.thermal_load_vec = self.stiffness.createVecRight()
+        self.nodal_force_vec = self.stiffness.createVecRight()  # external (contact) forces for the next step
+        self._work_vec = self.stiffness.createVecRight()
+        self.coordinates_vec = self.stiffness.createVecRight()
+        self.coordinates_vec.setArray(mesh.points[: self.n_owned_nodes].ravel())
+        self.temperature_vec = ghosted_vector(comm, mesh, 1)
+
+        self._constrained = np.zeros(3 * self.n_owned_nodes, dtype=np.bool_)
+        self._prescribed_displacement = np.zeros(3 * self.n_owned_nodes)
+        self._prescribed_velocity = np.zeros(3 * self.n_owned_nodes)
+        for entry in config.prescribed:
+            values = entry.velocity if entry.velocity is not None else entry.displacement
+            target = self._prescribed_velocity if entry.velocity is not None else self._prescribed_displacement
+            nodes = mesh.group_nodes[entry.group]
+            for d, value in enumerate(values):
+                if value is not None:
+                    self._constrained[3 * nodes + d] = True
+                    self._prescribed_displacement[3 * nodes + d] = 0.0
+                    self._prescribed_velocity[3 * nodes + d] = 0.0
+                    target[3 * nodes + d] = value
+        for group in config.fixed:  # fixed wins where a node is in both kinds of group
+            dofs = (3 * mesh.group_nodes[group][:, None] + np.arange(3)).ravel()
+            self._constrained[dofs] = True
+            self._prescribed_displacement[dofs] = 0.0
+            self._prescribed_velocity[dofs] = 0.0
+
+        self.time = 0.0
+        self.step_count = 0
+        self.external_work = 0.0  # work of applied loads and supports since construction [J]
+        self._thermal_energy = 0.0
+        self._critical_step = None
+        self._omega_bound = None
+        self._static_solver = None
+        self._mass_solver = None
+        self._surfaces = {}
+        self._diameter = float(np.linalg.norm(mesh.bounding_box[1] - mesh.bounding_box[0]))
+
+        self.set_gravity(gravity)
+        initial, reference = config.temperatures()
+        self.reference_temperature = 293.15 if reference is None else reference
+        self.set_temperature(self.reference_temperature if initial is None else initial)
+        self._set_velocity_from_constraints()
+
+    # ------------------------------------------------------------------ loads
+    def set_gravity(self, gravity) -> None:
+        """Collective: rebuild the constant load (gravity, tractions, point forces) for a new gravity vector."""
+        mesh = self.mesh
+        load = np.zeros((self.n_owned_nodes, 3))
+        body = self.density * np.asarray(gravity, dtype=float)
+        kernels.body_force_load(mesh.points, mesh.cells, self.n_owned_nodes, self.element.mass_values, self.element.mass_weights, body, load)
+        for entry in self.config.tractions:
+            kernels.traction_load(mesh.points, mesh.group_faces[entry.group], self.n_owned_nodes, np.asarray(entry.traction, float), load)
+        self.constant_load_vec.setArray(load.ravel())
+        if self.comm.rank == 0 and len(self.config.point_forces):
+            forces = np.array([p.force for p in self.config.point_forces], dtype=float)
+            self.constant_load_vec.setValuesBlocked(mesh.point_nodes.astype(PETSc.IntType), forces.ravel(), PETSc.InsertMode.ADD_VALUES)
+        self.constant_load_vec.assemble()
+        self.gravity = tuple(float(g) for g in gravity)
+
+    def set_temperature(self, nodal_temperatures) -> None:
+        """Collective: nodal temperature [K] of the owned nodes (array (n_owned,) or a scalar); rebuilds the thermal load."""
+        values = np.broadcast_to(np.asarray(nodal_temperatures, dtype=float), (self.n_owned_nodes,))
+        self.temperature_vec.setArray(values)
+        delta_t = local_values(self.temperature_vec, 1)[:, 0] - self.reference_temperature
+        load = np.zeros((self.n_owned_nodes, 3))
+        energy = 0.0
+        if self._thermal_load_coefficient != 0.0:
+            energy = kernels.thermal_load(
+                self.mesh.points, self.mesh.cells, self.n_owned_nodes, self.mesh.n_owned_cells, self.element.mass_values,
+                self.element.mass_gradients, self.element.mass_weights, delta_t, self._thermal_load_coefficient,
+                self._thermal_energy_coefficient, load,
+            )
+        self.thermal_load_vec.setArray(load.ravel())
+        self._thermal_energy = _sum(self.comm, energy)
+
+    def add_nodal_forces(self, global_node_indices, forces) -> None:
+        """Not collective: add forces (n, 3) [N] on nodes of any rank; applied in the next step (or static solve), then cleared."""
+        indices = np.asarray(global_node_indices, dtype=PETSc.IntType).ravel()
+        forces = np.ascontiguousarray(forces, dtype=float).reshape(len(indices), 3)
+        if len(indices):
+            self.nodal_force_vec.setValuesBlocked(indices, forces.ravel(), PETSc.InsertMode.ADD_VALUES)
+
+    def _gather_loads(self) -> None:
+        """Collective: load = constant + thermal + the nodal forces added since the last step (routed to owners)."""
+        self.nodal_force_vec.assemble()
+        self.load_vec.waxpy(1.0, self.constant_load_vec, self.thermal_load_vec)
+        self.load_vec.axpy(1.0, self.nodal_force_vec)
+
+    # ------------------------------------------------------------ constraints
+    def prescribe_owned_nodes(self, owned_nodes, displacement=None, velocity=None) -> None:
+        """Not collective: constrain owned nodes (numbers 0..n_owned-1) to displacement (n,3) or velocity (n,3).
+
+        For per-node data the scene cannot express (patch tests, coupling); call before static_solve.
+        """
+        nodes = np.asarray(owned_nodes, dtype=np.int64)
+        dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+        self._constrained[dofs] = True
+        self._prescribed_displacement[dofs] = 0.0 if displacement is None else np.asarray(displacement, float).ravel()
+        self._prescribed_velocity[dofs] = 0.0 if velocity is None else np.asarray(velocity, float).ravel()
+        self._static_solver = None
+        self._mass_solver = None
+        self._set_velocity_from_constraints()
+
+    def _set_velocity_from_constraints(self) -> None:
+        v = self.velocity_vec.getArray()
+        v[self._constrained] = self._prescribed_velocity[self._constrained]
+        self.velocity_vec.setArray(v)
+
+    def _constrained_rows(self) -> np.ndarray:
+        return (self.velocity_vec.getOwnershipRange()[0] + np.flatnonzero(self._constrained)).astype(PETSc.IntType)
+
+    # ------------------------------------------------------------------ static
+    def static_solve(self) -> StaticResult:
+        """Collective: u = K^-1 b with the prescribed displacements; the solid then starts at rest (prescribed velocities aside)."""
+        where = f"solid '{self.name}': static solve"
+        if _sum(self.comm, float(self._constrained.sum())) == 0:
+            raise SolverError(
+                where=where, problem="no node is fixed or prescribed: the static problem is singular (rigid-body motion)",
+                fix="add a fixed: [...] or prescribed: [...] group, or start without a static solve",
+            )
+        if self._static_solver is None:
+            # GAMG in PETSc 3.18 cannot build its graph from BAIJ: the static copy is AIJ (block size 3 kept).
+            constrained = self.stiffness.convert(PETSc.Mat.Type.AIJ, out=PETSc.Mat())  # out=: a copy, not in place
+            constrained.zeroRowsColumns(self._constrained_rows(), 1.0)
+            self._static_solver = make_static_solver(constrained, self.coordinates_vec)
+        self._gather_loads()
+        prescribed = self.velocity_vec.duplicate()
+        prescribed.setArray(np.where(self._constrained, self._prescribed_displacement, 0.0))
+        rhs = self.load_vec.duplicate()
+        self.stiffness.mult(prescribed, rhs)
+        rhs.aypx(-1.0, self.load_vec)  # b - K u_p: the prescribed values' effect on the free rows
+        rhs_array = rhs.getArray()
+        rhs_array[self._constrained] = self._prescribed_displacement[self._constrained]
+        rhs.setArray(rhs_array)
+        solution = self.velocity_vec.duplicate()
+        result = solve_static(self._static_solver, rhs, solution, where)
+        values = solution.getArray()
+        values[self._constrained] = self._prescribed_displacement[self._constrained]  # exact, not to solver tolerance
+        self.displacement_vec.setArray(values)
+        self.nodal_force_vec.zeroEntries()
+        self.velocity_vec.zeroEntries()
+        self._set_velocity_from_constraints()
+        self.acceleration_vec.zeroEntries()
+        self.stiffness.mult(self.displacement_vec, self.internal_force_vec)
+        if self.comm.rank == 0:
+            logger.info("solid %s: static solve %s+%s, %d iterations, residual %.3e (rhs %.3e), %s",
+                        self.name, result.ksp_type, result.pc_type, result.iterations, result.residual_norm, result.rhs_norm, result.reason)
+        return result
+
+    # ---------------------------------------------------------------- explicit
+    def largest_frequency_bound(self) -> float:
+        """Collective: omega_max bound [rad/s] = sqrt(max element eigenvalue) (see stability.py)."""
+        if self._omega_bound is None:
+            local = largest_element_eigenvalue(self.mesh.points, self.mesh.cells, self.mesh.n_owned_cells, self.element,
+                                               self.lam, self.mu, self.density, self.lumped)
+            buffer = np.array([local])
+            self.comm.Allreduce(MPI.IN_PLACE, buffer, op=MPI.MAX)
+            self._omega_bound = math.sqrt(buffer[0])
+        return self._omega_bound
+
+    def critical_time_step(self) -> float:
+        """Collective: largest stable central-difference step [s], never above the true one."""
+        if self._critical_step is None:
+            self._critical_step = critical_step(self.largest_frequency_bound(), self.damping_alpha, self.damping_beta)
+        return self._critical_step
+
+    def step(self, dt: float, check_stability: bool = True) -> None:
+        """Collective: one central-difference step with this step's nodal forces, which are then cleared.
+
+        A dt above critical_time_step() is refused (SolverError); check_stability=False skips that
+        check (the divergence monitor still stops a run that blows up).
+        """
+        if check_stability:
+            self._check_step(dt)
+        self._gather_loads()
+        self._advance(dt)
+        self.nodal_force_vec.zeroEntries()
+
+    def advance(self, interval: float) -> int:
+        """Collective: cover `interval` with the fewest equal stable steps (sub-cycling); returns their number.
+
+        Nodal forces added before the call act, constant, over the whole interval (impulse-preserving).
+        """
+        substeps = max(1, math.ceil(interval / self.critical_time_step() * (1.0 - 1e-12)))
+        dt = interval / substeps
+        self._gather_loads()
+        for _ in range(substeps):
+            self._advance(dt)
+        self.nodal_force_vec.zeroEntries()
+        return substeps
+
+    def _check_step(self, dt: float) -> None:
+        limit = self.critical_time_step()
+        if dt > limit * (1.0 + 1e-12):
+            raise SolverError(
+                where=f"solid '{self.name}': time step",
+                problem=(
+                    f"dt = {dt:.4e} s exceeds the critical central-difference step {limit:.4e} s "
+                    f"(omega_max <= {self.largest_frequency_bound():.4e} rad/s from the element bound)"
+                ),
+                fix="lower time.dt, refine less, or let the coupling sub-cycle the solid (Solid.advance)",
+            )
+
+    def _advance(self, dt: float) -> None:
+        if self.damping_beta != 0.0:
+            self._work_vec.waxpy(self.damping_beta, self.velocity_vec, self.displacement_vec)
+            self.stiffness.mult(self._work_vec, self.internal_force_vec)
+        else:
+            self.stiffness.mult(self.displacement_vec, self.internal_force_vec)
+        if not self.lumped:
+            self._solve_consistent_mass()
+        half_alpha = 0.5 * self.damping_alpha * dt
+        decay, gain = (1.0 - half_alpha) / (1.0 + half_alpha), 1.0 / (1.0 + half_alpha)
+        u = self.displacement_vec.getArray()
+        v = self.velocity_vec.getArray()
+        a = self.acceleration_vec.getArray()
+        work = kernels.central_difference_update(
+            u, v, a, self.internal_force_vec.getArray(readonly=True), self.load_vec.getArray(readonly=True),
+            self._inverse_lumped_mass, self._constrained, self._prescribed_velocity, dt, decay, gain, self.lumped,
+        )
+        self.displacement_vec.setArray(u)
+        self.velocity_vec.setArray(v)
+        self.acceleration_vec.setArray(a)
+        self.external_work += _sum(self.comm, work)
+        self.time += dt
+        self.step_count += 1
+        if self.step_count % BLOWUP_CHECK_EVERY == 0:
+            self._check_divergence(dt)
+
+    def _solve_consistent_mass(self) -> None:
+        if self._mass_solver is None:
+            constrained = self.consistent_mass.duplicate(copy=True)
+            constrained.zeroRowsColumns(self._constrained_rows(), 1.0)
+            ksp = PETSc.KSP().create(comm=self.comm)
+            ksp.setOptionsPrefix(MASS_SOLVE_PREFIX)
+            ksp.setOperators(constrained)
+            ksp.setType(PETSc.KSP.Type.CG)
+            ksp.getPC().setType(PETSc.PC.Type.JACOBI)
+            ksp.setTolerances(rtol=MASS_SOLVE_RTOL, atol=1e-300, max_it=500)
+            ksp.setInitialGuessNonzero(True)  # last step's acceleration: a few iterations
+            ksp.setFromOptions()
+            self._mass_solver = ksp
+        residual = self._work_vec
+        residual.waxpy(-1.0, self.internal_force_vec, self.load_vec)
+        r = residual.getArray()
+        r[self._constrained] = 0.0
+        residual.setArray(r)
+        self._mass_solver.solve(residual, self.acceleration_vec)
+        if self._mass_solver.getConvergedReason() < 0:
+            raise SolverError(where=f"solid '{self.name}': consistent mass solve",
+                              problem=f"CG+Jacobi failed ({self._mass_solver.getConvergedReason()})",
+                              fix="use mass: lumped, or pass -fem_mass_ksp_max_it / -fem_mass_ksp_rtol")
+
+    def _check_divergence(self, dt: float) -> None:
+        largest = self.displacement_vec.norm(PETSc.NormType.INFINITY)
+        if not np.isfinite(largest) or largest > self._diameter:
+            raise SolverError(
+                where=f"solid '{self.name}': explicit step {self.step_count} (t = {self.time:.4e} s)",
+                problem=(
+                    f"the solution blew up: max |u| = {largest:.3e} m exceeds the solid's size {self._diameter:.3e} m "
+                    f"(dt = {dt:.4e} s, critical step bound {self.critical_time_step():.4e} s)"
+                ),
+                fix="lower the time step (dt above the critical step grows the highest mode every step)",
+            )
+
+    # ----------------------------------------------------------------- state
+    @property
+    def positions(self) -> np.ndarray:
+        """Current positions (n_owned, 3) [m]."""
+        return self.mesh.points[: self.n_owned_nodes] + self.displacements
+
+    @property
+    def reference_positions(self) -> np.ndarray:
+        return self.mesh.points[: self.n_owned_nodes].copy()
+
+    @property
+    def displacements(self) -> np.ndarray:
+        return self.displacement_vec.getArray(readonly=True).reshape(-1, 3).copy()
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """Velocity over the last step v^{n-1/2} (exact for prescribed nodes), (n_owned, 3) [m/s]."""
+        return self.velocity_vec.getArray(readonly=True).reshape(-1, 3).copy()
+
+    @property
+    def temperatures(self) -> np.ndarray:
+        return self.temperature_vec.getArray(readonly=True).copy()
+
+    @property
+    def original_node_ids(self) -> np.ndarray:
+        """Owned nodes' numbers in the input mesh (P2 midside nodes: n_corners + edge number)."""
+        return self.mesh.original_node_ids
+
+    @property
+    def original_cell_ids(self) -> np.ndarray:
+        return self.mesh.original_cell_ids
+
+    def set_state(self, displacements, velocities) -> None:
+        """Not collective: owned displacements and half-step velocities (n_owned, 3), e.g. from a checkpoint."""
+        self.displacement_vec.setArray(np.asarray(displacements, float).ravel())
+        self.velocity_vec.setArray(np.asarray(velocities, float).ravel())
+
+    # -------------------------------------------------------- post-processing
+    @property
+    def stresses(self) -> np.ndarray:
+        """Collective: Cauchy stress at each owned cell's centroid, Voigt (xx, yy, zz, yz, xz, xy) [Pa]."""
+        displacement = local_values(self.displacement_vec, 3)
+        delta_t = local_values(self.temperature_vec, 1)[:, 0] - self.reference_temperature
+        out = np.empty((self.mesh.n_owned_cells, 6))
+        kernels.cell_stresses(self.mesh.points, self.mesh.cells, self.mesh.n_owned_cells, displacement, delta_t,
+                              self.element.centroid_gradients, self.element.centroid_values, self.lam, self.mu,
+                              self._thermal_load_coefficient, out)
+        return out
+
+    @property
+    def von_mises(self) -> np.ndarray:
+        """Collective: von Mises stress per owned cell (at the centroid) [Pa]."""
+        s = self.stresses
+        return np.sqrt(0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2)
+                       + 3.0 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2))
+
+    def group_node_numbers(self, group: str) -> np.ndarray:
+        """Owned node numbers (0..n_owned-1) on a fixed/prescribed/traction/contact group."""
+        if group not in self.mesh.group_nodes:
+            raise MeshError(where=f"{self.mesh.source}: group '{group}'",
+                            problem=f"solid '{self.name}' does not use this group (known: {sorted(self.mesh.group_nodes)})",
+                            fix="name it under fixed, prescribed, tractions or contact")
+        return self.mesh.group_nodes[group]
+
+    def reaction(self, group: str) -> np.ndarray:
+        """Collective: total force (3,) [N] the supports exert on the group's nodes at the last force evaluation.
+
+        R = K (u + beta v) + C_alpha v + M a - f on the group's nodes (after a static solve: K u - f),
+        summed over ranks; meaningful on fixed and prescribed groups.
+        """
+        nodes = self.group_node_numbers(group)
+        force = (self.internal_force_vec.getArray(readonly=True) - self.load_vec.getArray(readonly=True)).reshape(-1, 3)
+        if self.lumped:
+            mass = self.lumped_mass.getArray(readonly=True)
+            inertia = mass * (self.acceleration_vec.getArray(readonly=True) + self.damping_alpha * self.velocity_vec.getArray(readonly=True))
+        else:
+            product = self.velocity_vec.duplicate()
+            self._work_vec.waxpy(self.damping_alpha, self.velocity_vec, self.acceleration_vec)
+            self.consistent_mass.mult(self._work_vec, product)
+            inertia = product.getArray(readonly=True)
+        total = (force + inertia.reshape(-1, 3))[nodes].sum(axis=0)
+        self.comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
+        return total
+
+    def kinetic_energy(self) -> float:
+        """Collective: 1/2 v^T M v with the half-step velocity [J]."""
+        if self.lumped:
+            v = self.velocity_vec.getArray(readonly=True)
+            return 0.5 * _sum(self.comm, float(np.dot(v * self.lumped_mass.getArray(readonly=True), v)))
+        product = self.velocity_vec.duplicate()
+        self.consistent_mass.mult(self.velocity_vec, product)
+        return 0.5 * product.dot(self.velocity_vec)
+
+    def strain_energy(self) -> float:
+        """Collective: int 1/2 (eps - eps_th) : D : (eps - eps_th) dV [J] (exact quadrature)."""
+        product = self.velocity_vec.duplicate()
+        self.stiffness.mult(self.displacement_vec, product)
+        return 0.5 * product.dot(self.displacement_vec) - self.thermal_load_vec.dot(self.displacement_vec) + self._thermal_energy
+
+    # ---------------------------------------------------------------- surface
+    def contact_surface(self, groups=None) -> ContactSurface:
+        """Collective on first use: the contact groups' triangles and a gather of their nodes' state."""
+        groups = tuple(self.config.contact if groups is None else groups)
+        unknown = [g for g in groups if g not in self.mesh.contact_faces]
+        if unknown:
+            raise MeshError(where=f"{self.mesh.source}: group '{unknown[0]}'",
+                            problem=f"not a contact group of solid '{self.name}' (contact: {list(self.config.contact)})",
+                            fix="list it under the solid's contact: key")
+        if groups not in self._surfaces:
+            self._surfaces[groups] = ContactSurface(self.mesh.contact_faces, groups, self.coordinates_vec)
+        return self._surfaces[groups]
+
+    def surface_triangles(self, groups=None) -> np.ndarray:
+        """Collective on first use: (nt, 3) global node numbers of the contact triangles, outward-oriented, same on every rank."""
+        return self.contact_surface(groups).triangles_global
+
+    def surface_state(self, groups=None) -> tuple:
+        """Collective: (node numbers (ns,), positions (ns,3), velocities (ns,3)) of the contact nodes on every rank."""
+        surface = self.contact_surface(groups)
+        positions, velocities = surface.gather(self.displacement_vec, self.velocity_vec)
+        return surface.node_indices, positions, velocities
