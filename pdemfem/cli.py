@@ -305,9 +305,12 @@ def check_report(path: str) -> tuple:
                 if value is not None:
                     parts.append(f"{label} {value:.3g} s")
             shortest = durations.shortest
-            lines.append(f"contact duration at {speed:.3g} m/s: {', '.join(parts)}; "
-                         f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact; "
-                         f"want >= {derived.DT_PER_CONTACT:.0f})")
+            if shortest is None:
+                lines.append("contact duration: no contacts possible (one particle, no walls)")
+            else:
+                lines.append(f"contact duration at {speed:.3g} m/s: {', '.join(parts)}; "
+                             f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact; "
+                             f"want >= {derived.DT_PER_CONTACT:.0f})")
         memory = derived.memory_estimate_bytes(scene)
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({derived.BYTES_PER_PARTICLE} B/particle, "
                      f"all ranks) + ~200 MB per rank for Python, numba and PETSc")

@@ -275,19 +275,36 @@ def test_expected_impact_speed_rule():
         scene["walls"][0]["point"] = [0, 0, -0.02]  # floor 2 cm below the region bottom
 
     scene, _ = load_scene(modified(falling))
-    # Region top z = 0.1 falls to the floor at z = -0.02: h = 0.12.
-    assert derived.fall_height(scene) == pytest.approx(0.12)
-    assert derived.expected_impact_speed(scene) == pytest.approx(1.0 + math.sqrt(2 * 9.81 * 0.12))
+    # The highest particle's lowest point starts at the region top minus a diameter (0.098)
+    # and falls to the floor at z = -0.02: h = 0.118.
+    assert derived.fall_height(scene) == pytest.approx(0.118)
+    assert derived.expected_impact_speed(scene) == pytest.approx(1.0 + math.sqrt(2 * 9.81 * 0.118))
     # A tilted floor counts where the particles are: the plane z = -0.1 x through the origin
-    # lies at z = -0.005 under the region's far edge x = 0.05, so the top corner there falls 0.105.
+    # lies at z = -0.0049 under the last column of centres (x = 0.049), so that particle falls 0.1029.
     tilted, _ = load_scene(modified(lambda s: s["walls"][0].update(normal=[0.1, 0, 1])))
-    assert derived.fall_height(tilted) == pytest.approx(0.105, rel=1e-9)
-    # Without an upward-facing wall the particles only meet each other: the region's height span.
+    assert derived.fall_height(tilted) == pytest.approx(0.1029, rel=1e-9)
+    # Without an upward-facing wall the particles only meet each other: the region's span less a diameter.
     free, _ = load_scene(modified(lambda s: s.update(walls=[])))
-    assert derived.fall_height(free) == pytest.approx(0.1)
+    assert derived.fall_height(free) == pytest.approx(0.098)
     # A given value wins.
     given, _ = load_scene(modified(lambda s: s["time"].update(expected_impact_speed=3.0)))
     assert derived.expected_impact_speed(given) == 3.0
+
+
+def test_impact_speed_of_particles_moving_towards_each_other():
+    def head_on(scene):
+        scene["gravity"] = [0, 0, 0]
+        scene["particles"][0]["insert"] = {
+            "kind": "list", "positions": [[0, 0, 0.5], [0.01, 0, 0.5]], "velocities": [[0.5, 0, 0], [-0.5, 0, 0]],
+        }
+
+    scene, _ = load_scene(modified(head_on))
+    assert derived.expected_impact_speed(scene) == pytest.approx(1.0)  # closing speed, not 0.5
+    # A listed particle resting on the floor does not "fall" its own radius.
+    resting, _ = load_scene(modified(lambda s: s["particles"][0].update(
+        insert={"kind": "list", "positions": [[0, 0, 0.001]], "velocities": [[0.3, 0, 0]]})))
+    assert derived.fall_height(resting) == 0.0
+    assert derived.expected_impact_speed(resting) == pytest.approx(0.3)
 
 
 def test_hertz_contact_duration_matches_the_formula():

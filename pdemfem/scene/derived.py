@@ -135,6 +135,26 @@ def _norm(a) -> float:
     return math.sqrt(_dot(a, a))
 
 
+def _group_bottoms(group: ParticleGroupConfig, up) -> List[Tuple[float, float, float]]:
+    """Lowest points (along -up) of particles at the extremes of where a group starts.
+
+    A listed particle: its centre minus r up.  A region: the particles lie inside
+    the box, so the smallest particle's centre ranges over the box shrunk by r_min;
+    the corners of that box, minus r_min up, bound every particle's lowest point
+    from above (top corners) and are exact at the bottom.
+    """
+    insert = group.insert
+    if insert.kind == "list":
+        smallest, _ = group_radius_range(group)
+        radii = insert.radii or [group.radius if not isinstance(group.radius, RadiusRange) else smallest] * len(
+            insert.positions or ())
+        return [tuple(c - r * u for c, u in zip(p, up)) for p, r in zip(insert.positions or (), radii)]
+    r, _ = group_radius_range(group)
+    (x0, y0, z0), (x1, y1, z1) = insert.region.box
+    corners = [(x, y, z) for x in (x0 + r, x1 - r) for y in (y0 + r, y1 - r) for z in (z0 + r, z1 - r)]
+    return [tuple(c - r * u for c, u in zip(corner, up)) for corner in corners]
+
+
 def _group_points(group: ParticleGroupConfig) -> List[Tuple[float, float, float]]:
     """Points bounding where a group's particles start: region box corners or list positions."""
     insert = group.insert
@@ -144,28 +164,45 @@ def _group_points(group: ParticleGroupConfig) -> List[Tuple[float, float, float]
     return [(x, y, z) for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)]
 
 
-def _initial_speeds(group: ParticleGroupConfig) -> List[float]:
+def _initial_velocities(group: ParticleGroupConfig) -> List[Tuple[float, float, float]]:
     insert = group.insert
     if insert.kind == "list" and insert.velocities:
-        return [_norm(v) for v in insert.velocities]
-    return [_norm(insert.velocity)]
+        return [tuple(v) for v in insert.velocities]
+    return [tuple(insert.velocity)]
+
+
+def _velocity_spread(velocities: List[Tuple[float, float, float]]) -> float:
+    """Largest |v_i - v_j| over the initial velocities (exact for up to 2000 distinct ones,
+    else the bound 2 max |v - mean|)."""
+    distinct = list(dict.fromkeys(velocities))
+    if len(distinct) < 2:
+        return 0.0
+    if len(distinct) <= 2000:
+        return max(
+            _norm(tuple(a - b for a, b in zip(u, v))) for i, u in enumerate(distinct) for v in distinct[i + 1:]
+        )
+    mean = tuple(sum(v[k] for v in distinct) / len(distinct) for k in range(3))
+    return 2.0 * max(_norm(tuple(a - b for a, b in zip(v, mean))) for v in distinct)
 
 
 def fall_height(scene: Scene) -> float:
     """Largest free-fall height h of the scene (the rule `expected_impact_speed` uses).
 
-    Heights are measured against gravity.  For every starting point (the corners of
-    each insertion region, or each listed position) the drop is the distance down
-    to the first plane wall below it that faces upwards (normal . up > 0, e.g. a
-    floor or a tilted chute) -- along the vertical, so tilted planes count where
-    the point actually is.  When no such wall lies below a point, the drop is taken
-    to the lowest starting point of all particles (particles then only hit each
-    other).  h is the largest drop; 0 without gravity or particles.  Conservative
-    by up to two radii (region corners bound the centres).
+    Heights are measured against gravity, from the lowest point of each particle
+    at the extremes of where it starts (listed particles: centre minus radius;
+    regions: the top of the region minus the smallest diameter, see
+    `_group_bottoms`).  Each such point drops to the first plane wall below it
+    that faces upwards (normal . up > 0, e.g. a floor or a tilted chute),
+    measured along the vertical, so tilted planes count where the point is.  Where
+    no such wall lies below a point, it drops to the lowest starting point of all
+    particles (particles then only hit each other).  h is the largest drop; 0
+    without gravity or particles.
     """
     up = _up(scene)
-    points = [point for group in scene.particles for point in _group_points(group)]
-    if up is None or not points:
+    if up is None or not scene.particles:
+        return 0.0
+    points = [point for group in scene.particles for point in _group_bottoms(group, up)]
+    if not points:
         return 0.0
     lowest = min(_dot(point, up) for point in points)
     height = 0.0
@@ -178,8 +215,8 @@ def fall_height(scene: Scene) -> float:
                 continue
             # Move from `point` along -up until n . (x - p0) = 0.
             drop = (_dot(normal, point) - _dot(normal, wall.point)) / facing
-            if drop >= 0.0:
-                drops.append(drop)
+            if drop >= -1e-12 * max(1.0, abs(_dot(normal, point))):
+                drops.append(max(drop, 0.0))
         height = max(height, min(drops) if drops else _dot(point, up) - lowest)
     return height
 
@@ -188,23 +225,30 @@ def impact_speed_estimate(scene: Scene) -> Tuple[float, str]:
     """(speed, how it was obtained) -- see `expected_impact_speed`."""
     if scene.time.expected_impact_speed is not None:
         return float(scene.time.expected_impact_speed), "time.expected_impact_speed"
-    initial = max((speed for group in scene.particles for speed in _initial_speeds(group)), default=0.0)
+    velocities = [v for group in scene.particles for v in _initial_velocities(group)]
+    initial = max((_norm(v) for v in velocities), default=0.0)
+    spread = _velocity_spread(velocities)
     wall_speed = max((_norm(wall.velocity) for wall in scene.walls), default=0.0)
-    g = _norm(scene.gravity)
     height = fall_height(scene)
-    speed = initial + math.sqrt(2.0 * g * height) + wall_speed
-    how = (
-        f"estimated: largest initial speed {initial:.3g} m/s + free fall sqrt(2 g h) over h = {height:.3g} m"
-        + (f" + wall speed {wall_speed:.3g} m/s" if wall_speed else "")
-    )
-    return speed, how
+    fall = math.sqrt(2.0 * _norm(scene.gravity) * height)
+    on_walls = initial + wall_speed + fall
+    between = spread + fall
+    if between > on_walls:
+        how = (f"estimated: largest initial relative speed of two particles {spread:.3g} m/s"
+               f" + free fall sqrt(2 g h) over h = {height:.3g} m")
+        return between, how
+    how = (f"estimated: largest initial speed {initial:.3g} m/s + free fall sqrt(2 g h) over h = {height:.3g} m"
+           + (f" + wall speed {wall_speed:.3g} m/s" if wall_speed else ""))
+    return on_walls, how
 
 
 def expected_impact_speed(scene: Scene) -> float:
     """Largest impact speed [m/s] the scene should see.
 
-    time.expected_impact_speed when set; otherwise the largest initial particle
-    speed + sqrt(2 |g| h) + the largest wall speed, with h = `fall_height(scene)`.
+    time.expected_impact_speed when set; otherwise the larger of
+    (a) on walls: the largest initial particle speed + the largest wall speed, and
+    (b) between particles: the largest initial speed difference of two particles,
+    each plus the free-fall speed sqrt(2 |g| h), h = `fall_height(scene)`.
     A lower bound is never useful here, so every term is the worst case.
     """
     return impact_speed_estimate(scene)[0]
@@ -234,12 +278,14 @@ def _pairs(scene: Scene):
     """(kind, material_a, material_b, m*, R*, E*) for the smallest particle of each pair of groups
     and each group against each wall."""
     smallest = []
-    for group in scene.particles:
+    for group, count in zip(scene.particles, group_counts(scene)):
         material = scene.materials[group.material]
         radius, _ = group_radius_range(group)
-        smallest.append((group.material, material, radius, _mass(material, radius)))
-    for i, (name_a, a, r_a, m_a) in enumerate(smallest):
-        for name_b, b, r_b, m_b in smallest[i:]:
+        smallest.append((group.material, material, radius, _mass(material, radius), count))
+    for i, (name_a, a, r_a, m_a, count_a) in enumerate(smallest):
+        for j, (name_b, b, r_b, m_b, count_b) in enumerate(smallest[i:], start=i):
+            if count_a == 0 or count_b == 0 or (i == j and count_a < 2):
+                continue  # no such pair in the scene
             yield ("particle_particle", name_a, name_b, m_a * m_b / (m_a + m_b), r_a * r_b / (r_a + r_b),
                    _effective_modulus(a, b))
         for wall in scene.walls:
