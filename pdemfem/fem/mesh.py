@@ -7,6 +7,8 @@ on the bounding box's planes.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -96,33 +98,103 @@ def generate_box_mesh(spec: BoxMeshConfig) -> GlobalMesh:
 
 
 def read_mesh_file(path: Path) -> GlobalMesh:
-    """Tetrahedra and named triangle groups of a meshio-readable file (gmsh physical groups)."""
-    import meshio
-
+    """Tetrahedra and named triangle groups: gmsh .msh through the gmsh API, other formats through meshio."""
     source = str(path)
     if not path.is_file():
         raise MeshError(where=source, problem="file not found", fix="check the path (relative to the scene file)")
+    if path.suffix.lower() == ".msh":
+        # meshio keeps one physical tag per element, so a triangle in two groups ('boundary' and
+        # 'bottom') would lose one; gmsh's own reader keeps every group.
+        points, tets, triangle_groups = _read_gmsh_file(path)
+    else:
+        points, tets, triangle_groups = _read_meshio_file(path)
+    return _assemble_global_mesh(source, points, tets, triangle_groups)
+
+
+def _no_volume_error(source, other_volume=()):
+    problem = "the mesh has no volume cells (tetrahedra)"
+    if other_volume:
+        problem = f"the mesh's volume cells are {sorted(other_volume)}; only tetrahedra are supported"
+    return MeshError(where=source, problem=problem, fix="mesh the volume (gmsh: Mesh > 3D) with tetrahedra and save again")
+
+
+def _read_gmsh_file(path: Path):
+    import gmsh
+
+    source = str(path)
+    initialized_here = not gmsh.isInitialized()
+    if initialized_here:
+        gmsh.initialize(interruptible=False)
     try:
-        data = meshio.read(path)
-    except Exception as exc:  # meshio raises many types for malformed files
-        raise MeshError(where=source, problem=f"cannot read the mesh: {exc}", fix="export it from gmsh as .msh (format 4.1 or 2.2)") from exc
+        gmsh.option.setNumber("General.Terminal", 0)
+        try:
+            gmsh.open(source)
+        except Exception as exc:
+            raise MeshError(where=source, problem=f"cannot read the mesh ({exc})",
+                            fix="export it from gmsh as .msh (format 4.1 or 2.2)") from None
+        node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
+        order = np.argsort(node_tags)
+        sorted_tags = node_tags[order]
+        points = coordinates.reshape(-1, 3)[order]
+        tet_parts, other_volume = [], set()
+        for element_type, _, nodes in zip(*gmsh.model.mesh.getElements(3)):
+            name, _, _, n_nodes, _, n_corners = gmsh.model.mesh.getElementProperties(element_type)
+            if name.lower().startswith("tetrahedron"):
+                tet_parts.append(nodes.reshape(-1, n_nodes)[:, :4])
+            else:
+                other_volume.add(name)
+        if not tet_parts:
+            raise _no_volume_error(source, other_volume)
+        tets = np.searchsorted(sorted_tags, np.vstack(tet_parts)).astype(np.int64)
+        groups = {}
+        for dim, tag in gmsh.model.getPhysicalGroups(2):
+            name = gmsh.model.getPhysicalName(dim, tag) or str(tag)
+            parts = []
+            for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+                for element_type, _, nodes in zip(*gmsh.model.mesh.getElements(2, entity)):
+                    n_nodes = gmsh.model.mesh.getElementProperties(element_type)[3]
+                    parts.append(nodes.reshape(-1, n_nodes)[:, :3])
+            if parts:
+                groups[name] = np.searchsorted(sorted_tags, np.vstack(parts)).astype(np.int64)
+        gmsh.model.remove()
+    finally:
+        if initialized_here:
+            gmsh.finalize()
+    return points, tets, groups
+
+
+def _read_meshio_file(path: Path):
+    import meshio
+
+    source = str(path)
+    chatter = io.StringIO()
+    try:
+        # meshio prints and even calls sys.exit on some malformed files: keep both inside this error
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+            data = meshio.read(path)
+    except (Exception, SystemExit) as exc:
+        detail = " ".join(chatter.getvalue().split()) or f"{type(exc).__name__}: {exc}"
+        raise MeshError(where=source, problem=f"cannot read the mesh ({detail})",
+                        fix="export it from gmsh as .msh (format 4.1 or 2.2) or another meshio format") from None
     tet_blocks = [block.data[:, :4] for block in data.cells if block.type in ("tetra", "tetra10")]
-    other_volume = sorted({block.type for block in data.cells if block.type in ("hexahedron", "wedge", "pyramid", "hexahedron20", "hexahedron27")})
+    other_volume = {block.type for block in data.cells if block.type in ("hexahedron", "wedge", "pyramid", "hexahedron20", "hexahedron27")}
     if not tet_blocks:
-        problem = "the mesh has no volume cells (tetrahedra)"
-        if other_volume:
-            problem = f"the mesh's volume cells are {other_volume}; only tetrahedra are supported"
-        raise MeshError(where=source, problem=problem, fix="mesh the volume (gmsh: Mesh > 3D) with tetrahedra and save again")
-    tets = np.vstack(tet_blocks).astype(np.int64)
-    used = np.unique(tets)
-    renumber = np.full(len(data.points), -1, dtype=np.int64)
-    renumber[used] = np.arange(len(used))
-    points = np.asarray(data.points, dtype=float)[used]
+        raise _no_volume_error(source, other_volume)
+    points = np.asarray(data.points, dtype=float)
     if points.shape[1] != 3:
         raise MeshError(where=source, problem="points are not 3-D", fix="export a 3-D mesh")
+    return points, np.vstack(tet_blocks).astype(np.int64), _named_triangle_sets(data)
+
+
+def _assemble_global_mesh(source, points, tets, triangle_groups) -> GlobalMesh:
+    """Drop nodes no cell uses, orient cells, match group triangles to cell faces."""
+    used = np.unique(tets)
+    renumber = np.full(len(points), -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    points = points[used]
     tets = renumber[tets]
     groups = {}
-    for name, triangles in _named_triangle_sets(data).items():
+    for name, triangles in triangle_groups.items():
         triangles = renumber[triangles]
         if np.any(triangles < 0):
             raise MeshError(
