@@ -1,0 +1,141 @@
+"""Particle and solid XDMF/HDF5 output: what any rank count writes reads back exactly.
+
+The MPI case tests/mpi_cases/io_output.py writes deterministic data (tests/mpi_cases/io_data.py)
+from rank-local slabs; here it is read back with h5py, meshio's TimeSeriesReader and,
+when Debian's paraview is installed, ParaView's own Xdmf3 reader (pvpython).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import h5py
+import meshio
+import numpy as np
+import pytest
+
+from mpi_harness import CASES, run_under_mpi
+
+sys.path.insert(0, str(CASES))
+import io_data  # noqa: E402
+
+from pdemfem.io import xdmf  # noqa: E402
+
+
+@pytest.fixture(scope="module", params=[1, 2, 3])
+def written(request, tmp_path_factory):
+    out = tmp_path_factory.mktemp(f"io_{request.param}ranks")
+    run_under_mpi(request.param, "io_output.py", out)
+    return request.param, out
+
+
+def test_particle_values_read_back(written):
+    ranks, out = written
+    with h5py.File(out / "particles.h5", "r") as handle:
+        groups = sorted(k for k in handle if k.startswith("step_"))
+        assert [int(handle[g].attrs["step"]) for g in groups] == [s for s, _, _ in io_data.PARTICLE_STEPS]
+        for group, (step, time, count) in zip(groups, io_data.PARTICLE_STEPS):
+            g = handle[group]
+            assert g.attrs["time"] == time and g.attrs["count"] == count
+            ids = g["ids"][()]
+            assert np.array_equal(np.sort(ids), np.arange(count))
+            # rows are in rank order: rank r's slab in the order it passed them
+            stacked = np.concatenate([io_data.rank_particle_ids(count, r, ranks, step) for r in range(ranks)])
+            assert np.array_equal(ids, stacked)
+            expected = io_data.particle_arrays(ids, step)
+            for name, values in expected.items():
+                assert g[name].dtype == values.dtype
+                assert np.array_equal(g[name][()], values), name
+
+
+def test_particle_xdmf_index(written):
+    _, out = written
+    root = ET.parse(out / "particles.xdmf").getroot()
+    grids = root.find("Domain/Grid").findall("Grid")
+    assert [float(g.find("Time").get("Value")) for g in grids] == [t for _, t, _ in io_data.PARTICLE_STEPS]
+    for grid, (_, _, count) in zip(grids, io_data.PARTICLE_STEPS):
+        assert grid.find("Topology").get("TopologyType") == "Polyvertex"
+        assert int(grid.find("Topology").get("NumberOfElements")) == count
+        names = {a.get("Name") for a in grid.findall("Attribute")}
+        assert names == {"velocities", "radii", "ids", "forces", "temperature"}
+    assert not list(out.glob("*.tmp-*")), "temporary XDMF left behind"
+
+
+def test_solid_values_read_back_with_meshio(written):
+    _, out = written
+    points, cells = io_data.box_tet_mesh()
+    with meshio.xdmf.TimeSeriesReader(out / "block.xdmf") as reader:
+        file_points, file_cells = reader.read_points_cells()
+        assert np.array_equal(file_points, points)
+        assert file_cells[0].type == "tetra"
+        file_tets = file_cells[0].data
+        # cells are stored in rank order: compare as a set of rows
+        assert np.array_equal(np.unique(np.sort(file_tets, axis=1), axis=0), np.unique(np.sort(cells, axis=1), axis=0))
+        assert reader.num_steps == 3
+        for k, step in enumerate((0, 10, 20)):
+            time, point_data, cell_data = reader.read_data(k)
+            assert time == step * 1.0e-4
+            for name, values in io_data.nodal_fields(points, step).items():
+                assert np.array_equal(point_data[name], values), name
+            expected = io_data.cell_fields(points, file_tets, step)["von_mises"]
+            assert np.array_equal(cell_data["von_mises"][0], expected)
+
+
+def test_resume_truncates_later_steps(tmp_path):
+    run_under_mpi(2, "io_output.py", tmp_path, "--resume-check")
+    with h5py.File(tmp_path / "particles.h5", "r") as handle:
+        assert sorted(int(handle[k].attrs["step"]) for k in handle if k.startswith("step_")) == [0, 10, 30]
+        assert handle["step_0000000030"].attrs["count"] == 99
+    with meshio.xdmf.TimeSeriesReader(tmp_path / "block.xdmf") as reader:
+        reader.read_points_cells()
+        assert [reader.read_data(k)[0] for k in range(reader.num_steps)] == [0.0, 1.0e-3, 3.0e-3]
+    times = [float(g.find("Time").get("Value"))
+             for g in ET.parse(tmp_path / "particles.xdmf").getroot().find("Domain/Grid").findall("Grid")]
+    assert times == [0.0, 1.0e-3, 3.0e-3]
+
+
+def test_paraview_opens_both_series(written):
+    pvpython = shutil.which("pvpython")
+    if pvpython is None:
+        pytest.skip("pvpython not on PATH (Debian package paraview)")
+    ranks, out = written
+    if ranks != 2:
+        pytest.skip("ParaView is checked on the 2-rank files only (5 s per run)")
+    environment = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+    environment.setdefault("QT_QPA_PLATFORM", "offscreen")
+    completed = subprocess.run([pvpython, str(CASES / "io_paraview.py"), str(out / "particles.xdmf"),
+                                str(out / "block.xdmf")], capture_output=True, text=True, timeout=180,
+                               env=environment)
+    assert completed.returncode == 0, completed.stderr
+    lines = [json.loads(line) for line in completed.stdout.splitlines() if line.startswith("{")]
+    particles, block = lines
+    assert particles["points"] == [c for _, _, c in io_data.PARTICLE_STEPS]
+    assert particles["cells"] == particles["points"]  # one vertex cell per particle: drawable
+    assert particles["times"] == pytest.approx([t for _, t, _ in io_data.PARTICLE_STEPS])
+    for k, (step, _, count) in enumerate(io_data.PARTICLE_STEPS):
+        expected = io_data.particle_arrays(np.arange(count), step)
+        assert particles["sums"]["temperature"][k] == pytest.approx(expected["temperature"].sum(), rel=1e-12)
+    points, cells = io_data.box_tet_mesh()
+    assert block["points"] == [len(points)] * 3 and block["cells"] == [len(cells)] * 3
+    assert set(block["arrays"]) == {"displacements", "velocities", "temperature", "von_mises"}
+
+
+def test_xdmf_pieces():
+    assert xdmf.attribute_type(()) == "Scalar"
+    assert xdmf.attribute_type((3,)) == "Vector"
+    assert xdmf.attribute_type((3, 3)) == "Tensor"
+    assert xdmf.number_type(np.int64) == ("Int", 8)
+    assert xdmf.number_type(np.float32) == ("Float", 4)
+
+
+def test_write_atomic_replaces_whole_file(tmp_path):
+    target = tmp_path / "a.xdmf"
+    xdmf.write_atomic(target, "one")
+    xdmf.write_atomic(target, "two")
+    assert target.read_text() == "two"
+    assert [p.name for p in tmp_path.iterdir()] == ["a.xdmf"]
