@@ -372,3 +372,44 @@ def test_examples_are_valid_and_warning_free(path):
     assert base_dir == EXAMPLES
     assert derived.particle_count(scene) > 0
     assert derived.warnings(scene) == []
+
+
+def test_a_missing_mesh_file_is_named_with_its_resolved_path(tmp_path):
+    # Any key named `file` or `mesh` holding a string is a path relative to the scene file.
+    from pdemfem.scene.schema import WallConfig
+
+    if "file" not in WallConfig.model_fields:
+        pytest.skip("mesh walls are not in the scene schema yet")
+    folder = tmp_path / "scenes"
+    folder.mkdir()
+    text = GOOD_YAML + "  - {name: hopper, kind: mesh, file: meshes/hopper.stl, material: glass}\n"
+    path = write(folder, "scene.yaml", text)
+    error = scene_error(path)
+    expected = folder.resolve() / "meshes" / "hopper.stl"
+    assert str(error).startswith(f"{path}: line 14: walls[1].file: file not found: {expected}"), str(error)
+    assert "relative to the scene file's folder" in str(error)
+    expected.parent.mkdir()
+    expected.write_text("solid empty\nendsolid empty\n")
+    scene, _ = load_scene(path)  # found now
+    assert scene.walls[1].file == "meshes/hopper.stl"
+
+
+def test_drop_onto_a_cylinder():
+    from types import SimpleNamespace
+
+    def cylinder(radius, inside):
+        axis = SimpleNamespace(point=(0.0, 0.0, 0.0), direction=(2.0, 0.0, 0.0))  # horizontal, along x
+        return SimpleNamespace(kind="cylinder", axis=axis, radius=radius, inside=inside, velocity=(0, 0, 0),
+                               angular_velocity=(3.0, 0.0, 0.0))
+
+    up = (0.0, 0.0, 1.0)
+    drum = cylinder(0.1, inside=True)
+    assert derived._drop_to_wall((0.5, 0.0, 0.05), up, drum) == pytest.approx(0.15)  # to the bottom z = -0.1
+    assert derived._drop_to_wall((0.5, 0.06, 0.0), up, drum) == pytest.approx(0.08)  # bottom at z = -0.08 there
+    assert derived._drop_to_wall((0.5, 0.2, 0.0), up, drum) is None  # outside a drum: not a container
+    post = cylinder(0.1, inside=False)
+    assert derived._drop_to_wall((0.0, 0.0, 0.3), up, post) == pytest.approx(0.2)  # onto its top
+    assert derived._drop_to_wall((0.0, 0.2, 0.3), up, post) is None  # beside it
+    vertical = SimpleNamespace(**{**vars(drum), "axis": SimpleNamespace(point=(0, 0, 0), direction=(0, 0, 1))})
+    assert derived._drop_to_wall((0.0, 0.0, 0.3), up, vertical) is None
+    assert derived._wall_speed(drum) == pytest.approx(0.3)  # |omega| R of the rotating mantle

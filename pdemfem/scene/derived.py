@@ -36,6 +36,7 @@ __all__ = [
     "warnings",
     "DT_PER_CONTACT",
     "MAX_STEP_TRAVEL",
+    "TUNNEL_TRAVEL",
 ]
 
 # Hertz contact duration prefactor: t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5)  (DESIGN.md 1.1).
@@ -44,6 +45,9 @@ HERTZ_DURATION_FACTOR = 2.868
 DT_PER_CONTACT = 30.0
 # A particle should move at most this fraction of its radius per step at the impact speed.
 MAX_STEP_TRAVEL = 0.1
+# Mesh walls have no thickness: warn when a particle moves more than this fraction of its radius per
+# step relative to a mesh wall (first-contact overlap up to the travel; beyond ~r the centre crosses).
+TUNNEL_TRAVEL = 0.5
 
 
 # --------------------------------------------------------------------------- per-group helpers
@@ -207,18 +211,56 @@ def fall_height(scene: Scene) -> float:
     lowest = min(_dot(point, up) for point in points)
     height = 0.0
     for point in points:
-        drops = []
-        for wall in scene.walls:
-            normal = wall.normal
-            facing = _dot(normal, up)
-            if facing <= 1e-12:
-                continue
-            # Move from `point` along -up until n . (x - p0) = 0.
-            drop = (_dot(normal, point) - _dot(normal, wall.point)) / facing
-            if drop >= -1e-12 * max(1.0, abs(_dot(normal, point))):
-                drops.append(max(drop, 0.0))
+        drops = [drop for wall in scene.walls for drop in (_drop_to_wall(point, up, wall),) if drop is not None]
         height = max(height, min(drops) if drops else _dot(point, up) - lowest)
     return height
+
+
+def _drop_to_wall(point, up, wall) -> Optional[float]:
+    """Distance from `point` straight down (along -up) to `wall`, or None when it is not below.
+
+    Planes facing upwards and cylinders are exact; mesh walls are not known
+    without reading their file and are skipped (`warnings` says so).
+    """
+    kind = getattr(wall, "kind", "plane")
+    if kind == "plane":
+        normal = wall.normal
+        facing = _dot(normal, up)
+        if facing <= 1e-12:
+            return None
+        # Move from `point` along -up until n . (x - p0) = 0.
+        drop = (_dot(normal, point) - _dot(normal, wall.point)) / facing
+        if drop >= -1e-12 * max(1.0, abs(_dot(normal, point))):
+            return max(drop, 0.0)
+        return None
+    if kind == "cylinder" and getattr(wall, "axis", None) is not None and getattr(wall, "radius", None):
+        length = _norm(wall.axis.direction)
+        direction = tuple(c / length for c in wall.axis.direction)
+        offset = tuple(p - a for p, a in zip(point, wall.axis.point))
+        q = tuple(o - _dot(offset, direction) * d for o, d in zip(offset, direction))  # offset across the axis
+        u = tuple(c - _dot(up, direction) * d for c, d in zip(up, direction))  # up across the axis
+        a = _dot(u, u)
+        if a <= 1e-12:
+            return None  # vertical axis: the mantle is never below a point
+        # |q - t u|^2 = R^2  ->  a t^2 - 2 (q.u) t + |q|^2 - R^2 = 0
+        b = _dot(q, u)
+        c = _dot(q, q) - wall.radius**2
+        discriminant = b * b - a * c
+        if discriminant < 0.0:
+            return None
+        roots = sorted(((b - math.sqrt(discriminant)) / a, (b + math.sqrt(discriminant)) / a))
+        if getattr(wall, "inside", True):
+            return max(roots[1], 0.0) if c <= 0.0 else None  # inside: down to the far side of the mantle
+        return roots[0] if roots[0] >= 0.0 else None  # outside (a post): onto its top
+    return None
+
+
+def _wall_speed(wall) -> float:
+    """Largest speed of a wall's surface: its velocity, plus |omega| R for a rotating cylinder."""
+    speed = _norm(wall.velocity)
+    if getattr(wall, "kind", "plane") == "cylinder" and getattr(wall, "radius", None):
+        speed += _norm(getattr(wall, "angular_velocity", (0.0, 0.0, 0.0))) * wall.radius
+    return speed
 
 
 def impact_speed_estimate(scene: Scene) -> Tuple[float, str]:
@@ -228,7 +270,7 @@ def impact_speed_estimate(scene: Scene) -> Tuple[float, str]:
     velocities = [v for group in scene.particles for v in _initial_velocities(group)]
     initial = max((_norm(v) for v in velocities), default=0.0)
     spread = _velocity_spread(velocities)
-    wall_speed = max((_norm(wall.velocity) for wall in scene.walls), default=0.0)
+    wall_speed = max((_wall_speed(wall) for wall in scene.walls), default=0.0)
     height = fall_height(scene)
     fall = math.sqrt(2.0 * _norm(scene.gravity) * height)
     on_walls = initial + wall_speed + fall
@@ -290,8 +332,13 @@ def _pairs(scene: Scene):
                    _effective_modulus(a, b))
         for wall in scene.walls:
             w = scene.materials[wall.material]
-            # A flat wall: R = inf, m = inf, so R* = r and m* = m.
-            yield "particle_wall", name_a, wall.material, m_a, r_a, _effective_modulus(a, w)
+            # A wall has m = inf, so m* = m.  Flat (planes, mesh faces) and concave (inside a
+            # cylinder) walls are taken as flat, R* = r, the shorter contact; the outside of a
+            # cylinder (a post) is convex, R* = r R / (r + R).
+            r_eff = r_a
+            if getattr(wall, "kind", "plane") == "cylinder" and not getattr(wall, "inside", True) and wall.radius:
+                r_eff = r_a * wall.radius / (r_a + wall.radius)
+            yield "particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, w)
 
 
 def hertz_contact_duration(scene: Scene, speed: float) -> ContactDurations:
@@ -421,17 +468,58 @@ def warnings(scene: Scene) -> List[str]:
             f"neighbors.skin = {skin:g} m is more than a particle diameter: the Verlet lists grow a lot "
             "(cost ~ (r + skin)^3) for fewer rebuilds; 0.1-0.5 radius is usual"
         )
-    if _norm(scene.gravity) > 0.0 and not any(_dot(w.normal, _up(scene)) > 1e-12 for w in scene.walls):
+    up = _up(scene)
+    if up is not None and not any(_may_catch(wall, up) for wall in scene.walls):
         found.append("gravity is on but no wall faces upwards: the particles fall freely")
+    meshes = [wall.name for wall in scene.walls if getattr(wall, "kind", "plane") == "mesh"]
+    if meshes and scene.time.expected_impact_speed is None:
+        found.append(
+            f"the impact-speed estimate cannot see mesh walls ({', '.join(meshes)}): set "
+            "time.expected_impact_speed to the largest speed at which particles hit them"
+        )
+    found.extend(_tunnelling_warnings(scene, speed, dt, smallest_radius))
     for index, group in enumerate(scene.particles):
         _, largest = group_radius_range(group)
-        for wall in scene.walls:
+        for wall in _plane_walls(scene):
             outside = _points_behind_wall(group, wall, largest)
             if outside:
                 found.append(
                     f"particles[{index}] ({group.name}) starts partly behind or inside wall '{wall.name}' "
                     f"(normal points into the domain): move the region or the wall"
                 )
+    return found
+
+
+def _may_catch(wall, up) -> bool:
+    """Can this wall stop a falling particle? (planes facing up, non-vertical cylinders, meshes)."""
+    kind = getattr(wall, "kind", "plane")
+    if kind == "plane":
+        return _dot(wall.normal, up) > 1e-12
+    if kind == "cylinder" and getattr(wall, "axis", None) is not None:
+        direction = wall.axis.direction
+        return abs(_dot(direction, up)) < _norm(direction) * (1.0 - 1e-9)
+    return True
+
+
+def _plane_walls(scene: Scene) -> List[WallConfig]:
+    return [wall for wall in scene.walls if wall.kind == "plane"]
+
+
+def _tunnelling_warnings(scene: Scene, speed: float, dt: float, smallest_radius: float) -> List[str]:
+    """Mesh walls are thin: a sphere whose centre crosses a triangle's plane within one step is
+    pushed out on the far side (two-sided) or not at all (one-sided).  Warn when the travel per
+    step at the impact speed plus the wall's own speed exceeds TUNNEL_TRAVEL radii."""
+    found = []
+    for wall in scene.walls:
+        if wall.kind != "mesh":
+            continue
+        travel = (speed + _norm(wall.velocity)) * dt
+        if travel > TUNNEL_TRAVEL * smallest_radius:
+            found.append(
+                f"mesh wall '{wall.name}': at {speed + _norm(wall.velocity):.3g} m/s (impact + wall speed) a particle "
+                f"moves {travel / smallest_radius:.2f} radii per step (want <= {TUNNEL_TRAVEL}); it can tunnel through "
+                f"the thin mesh: lower time.dt / time.dt_factor, or set time.expected_impact_speed if it is lower"
+            )
     return found
 
 

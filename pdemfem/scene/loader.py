@@ -38,6 +38,7 @@ __all__ = [
     "scene_hash",
     "format_key_path",
     "key_line",
+    "FILE_KEYS",
     "HASH_EXCLUDED_KEYS",
 ]
 
@@ -93,7 +94,36 @@ def load_scene(source: SceneSource, base_dir: Optional[Union[str, os.PathLike]] 
     except ValidationError as error:
         problems = _translate(error, data)
         raise _scene_error(label, problems, nodes) from None
+    missing = [
+        _Problem(path, f"file not found: {resolve_path(folder, value)}",
+                 "paths in a scene are relative to the scene file's folder; correct the path or add the file")
+        for path, value in _file_keys(scene, ())
+        if not resolve_path(folder, value).is_file()
+    ]
+    if missing:
+        raise _scene_error(label, missing, nodes)
     return scene, folder
+
+
+# Keys whose string values name files (relative to the scene file): wall meshes, solid meshes.
+FILE_KEYS = ("file", "mesh")
+
+
+def _file_keys(node, path: KeyPath):
+    """(key path, value) of every file named in a validated scene."""
+    if isinstance(node, BaseModel):
+        for name in type(node).model_fields:
+            value = getattr(node, name)
+            if name in FILE_KEYS and isinstance(value, (str, os.PathLike)):
+                yield path + (name,), value
+            else:
+                yield from _file_keys(value, path + (name,))
+    elif isinstance(node, (list, tuple)):
+        for index, item in enumerate(node):
+            yield from _file_keys(item, path + (index,))
+    elif isinstance(node, dict):
+        for key, item in node.items():
+            yield from _file_keys(item, path + (key,))
 
 
 def resolve_path(base_dir: Union[str, os.PathLike], value: Union[str, os.PathLike]) -> Path:
