@@ -42,6 +42,23 @@ def normal_stiffnesses(model, overlap, effective_mass, effective_radius, effecti
 
 
 @njit(inline="always", cache=True)
+def released_spring_energy(model, previous_overlap, xi_squared, effective_mass, effective_radius,
+                           effective_modulus, effective_shear_modulus, constant_stiffness, tangential_ratio,
+                           characteristic_speed):
+    """Energy 1/2 S_t |xi|^2 the tangential spring held at the previous step's overlap.
+
+    Booked as dissipated when a contact opens with a loaded spring (the history is
+    zeroed), and used as the spring energy before the update while it stays closed.
+    """
+    if xi_squared == 0.0 or previous_overlap <= 0.0:
+        return 0.0
+    tangential_stiffness = normal_stiffnesses(
+        model, previous_overlap, effective_mass, effective_radius, effective_modulus, effective_shear_modulus,
+        constant_stiffness, tangential_ratio, characteristic_speed)[2]
+    return 0.5 * tangential_stiffness * xi_squared
+
+
+@njit(inline="always", cache=True)
 def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass, effective_radius,
                      effective_modulus, effective_shear_modulus, damping, friction, rolling_friction, model,
                      constant_stiffness, tangential_ratio, characteristic_speed, effective_inertia,
@@ -81,7 +98,14 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
             xi_x *= scale
             xi_y *= scale
             xi_z *= scale
-    spring_energy_before = 0.5 * tangential_stiffness * (xi_x * xi_x + xi_y * xi_y + xi_z * xi_z)
+    # The spring energy booked last step used last step's stiffness (Hertz: S_t ~ sqrt(delta)); v is the
+    # step's displacement / dt, so that step's overlap was overlap - approach_rate * dt.
+    spring_energy_before = 0.0
+    if old_length_squared > 0.0:
+        spring_energy_before = released_spring_energy(
+            model, overlap - approach_rate * dt, xi_x * xi_x + xi_y * xi_y + xi_z * xi_z, effective_mass,
+            effective_radius, effective_modulus, effective_shear_modulus, constant_stiffness, tangential_ratio,
+            characteristic_speed)
     xi_x += tx * dt
     xi_y += ty * dt
     xi_z += tz * dt
@@ -92,15 +116,17 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
     tangential_force = math.sqrt(fx * fx + fy * fy + fz * fz)
     friction_limit = friction * normal_force
     if tangential_force > friction_limit:
-        # Coulomb slip: cap the force and shrink the spring so that it is consistent.
+        # Coulomb slip: cap the force and let the spring alone hold it (S_t xi = -F_t).  Folding the
+        # dashpot into xi as well, xi = -(F_t + c v_t) / S_t, points xi against the force whenever
+        # c |v_t| > mu F_n; with S_t growing (Hertz) the next step's force then pushes along the slip.
         scale = friction_limit / tangential_force
         fx *= scale
         fy *= scale
         fz *= scale
         if tangential_stiffness > 0.0:
-            xi_x = -(fx + tangential_damping * tx) / tangential_stiffness
-            xi_y = -(fy + tangential_damping * ty) / tangential_stiffness
-            xi_z = -(fz + tangential_damping * tz) / tangential_stiffness
+            xi_x = -fx / tangential_stiffness
+            xi_y = -fy / tangential_stiffness
+            xi_z = -fz / tangential_stiffness
     history[row, 0] = xi_x
     history[row, 1] = xi_y
     history[row, 2] = xi_z
@@ -162,6 +188,19 @@ def pair_forces(first_row, last_row, neighbor_offsets, neighbor_partners, pair_h
             distance_squared = dx * dx + dy * dy + dz * dz
             radius_sum = radius_i + radii[j]
             if distance_squared >= radius_sum * radius_sum:
+                xi_squared = pair_history[row, 0] ** 2 + pair_history[row, 1] ** 2 + pair_history[row, 2] ** 2
+                if xi_squared > 0.0:
+                    # The contact opened this step: its spring energy (booked as elastic) is lost.
+                    ex = dx - dt * (velocities[i, 0] - velocities[j, 0])
+                    ey = dy - dt * (velocities[i, 1] - velocities[j, 1])
+                    ez = dz - dt * (velocities[i, 2] - velocities[j, 2])
+                    material_j = material_index[j]
+                    dissipated_total += released_spring_energy(
+                        model_code[material_i, material_j], radius_sum - math.sqrt(ex * ex + ey * ey + ez * ez),
+                        xi_squared, mass[i] * mass[j] / (mass[i] + mass[j]), radius_i * radii[j] / radius_sum,
+                        effective_modulus[material_i, material_j], effective_shear_modulus[material_i, material_j],
+                        normal_stiffness[material_i, material_j], tangential_ratio[material_i, material_j],
+                        characteristic_speed)
                 pair_history[row, 0] = 0.0
                 pair_history[row, 1] = 0.0
                 pair_history[row, 2] = 0.0
@@ -246,6 +285,19 @@ def plane_wall_forces(first, last, wall_points, wall_normals, wall_velocities, w
                         + (positions[i, 2] - wall_points[w, 2]) * nz)
             overlap = radius - distance
             if overlap <= 0.0:
+                xi_squared = wall_history[i, w, 0] ** 2 + wall_history[i, w, 1] ** 2 + wall_history[i, w, 2] ** 2
+                if xi_squared > 0.0:
+                    # The contact opened this step: its spring energy (booked as elastic) is lost.
+                    previous_distance = distance - dt * ((velocities[i, 0] - wall_velocities[w, 0]) * nx
+                                                         + (velocities[i, 1] - wall_velocities[w, 1]) * ny
+                                                         + (velocities[i, 2] - wall_velocities[w, 2]) * nz)
+                    material_i = material_index[i]
+                    material_w = wall_material[w]
+                    dissipated_total += released_spring_energy(
+                        model_code[material_i, material_w], radius - previous_distance, xi_squared, mass[i], radius,
+                        effective_modulus[material_i, material_w], effective_shear_modulus[material_i, material_w],
+                        normal_stiffness[material_i, material_w], tangential_ratio[material_i, material_w],
+                        characteristic_speed)
                 wall_history[i, w, 0] = 0.0
                 wall_history[i, w, 1] = 0.0
                 wall_history[i, w, 2] = 0.0
