@@ -105,6 +105,10 @@ BAD_SCENES = {
         lambda s: s["interactions"].update({"glass-steel": {"restitution": 0.3}}),
         "interactions.glass-steel", "known materials", "docs/scene.md",
     ),
+    "misspelt material name": (
+        lambda s: s["particles"][0].update(material="glas"),
+        "particles[0].material", "unknown material 'glas'", "did you mean 'glass'?",
+    ),
     "wall with unknown material": (
         lambda s: s["walls"][0].update(material="rubber"),
         "walls[0].material", "unknown material 'rubber'", "define it under materials",

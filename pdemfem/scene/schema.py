@@ -6,6 +6,7 @@ errors into one message per problem that names the key path and the fix.
 """
 from __future__ import annotations
 
+import difflib
 from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -145,6 +146,13 @@ class NeighborConfig(StrictModel):
     )
 
 
+def _unknown_material(key: str, name: str, known) -> str:
+    """'key: problem; fix' for a material name not under materials (a close name is suggested)."""
+    close = difflib.get_close_matches(name, sorted(known), n=1)
+    hint = f"did you mean '{close[0]}'? otherwise " if close else ""
+    return f"{key}: unknown material '{name}'; {hint}define it under materials (known: {sorted(known)})"
+
+
 class Scene(StrictModel):
     time: TimeConfig
     gravity: Vector3 = (0.0, 0.0, -9.81)
@@ -160,16 +168,10 @@ class Scene(StrictModel):
         known = set(self.materials)
         for index, group in enumerate(self.particles):
             if group.material not in known:
-                raise ValueError(
-                    f"particles[{index}].material: unknown material '{group.material}'; "
-                    f"define it under materials (known: {sorted(known)})"
-                )
+                raise ValueError(_unknown_material(f"particles[{index}].material", group.material, known))
         for index, wall in enumerate(self.walls):
             if wall.material not in known:
-                raise ValueError(
-                    f"walls[{index}].material: unknown material '{wall.material}'; "
-                    f"define it under materials (known: {sorted(known)})"
-                )
+                raise ValueError(_unknown_material(f"walls[{index}].material", wall.material, known))
         for key in self.interactions:
             if key == "default":
                 continue
