@@ -231,10 +231,11 @@ def _command_run(arguments, comm) -> int:
         raise located from None
     if not arguments.quiet:
         count = derived.particle_count(scene)
+        dt = getattr(simulation, "dt", None) or derived.time_step(scene)
         _say(comm, f"pdemfem run {arguments.scene}: {count} particles on {comm.size} rank(s), "
-                   f"dt = {simulation.dt:.3g} s, end = {scene.time.end:g} s, output: {simulation.output_dir}")
+                   f"dt = {dt:.3g} s, end = {scene.time.end:g} s, output: {output_dir}")
     simulation.run(progress=not arguments.quiet)
-    _say(comm, f"results: {simulation.output_dir}", arguments.quiet)
+    _say(comm, f"results: {output_dir}", arguments.quiet)
     return 0
 
 
