@@ -91,7 +91,7 @@ BAD_SCENES = {
     ),
     "missing materials section": (
         lambda s: s.pop("materials"),
-        "materials", "required key 'materials' is missing", "add materials: {glass: {density",
+        "materials", "required key 'materials' is missing", "e.g. materials: {glass: {density",
     ),
     "negative radius": (
         lambda s: s["particles"][0].update(radius=-0.001),
@@ -417,3 +417,10 @@ def test_drop_onto_a_cylinder():
     vertical = SimpleNamespace(**{**vars(drum), "axis": SimpleNamespace(point=(0, 0, 0), direction=(0, 0, 1))})
     assert derived._drop_to_wall((0.0, 0.0, 0.3), up, vertical) is None
     assert derived._wall_speed(drum) == pytest.approx(0.3)  # |omega| R of the rotating mantle
+
+
+def test_odd_yaml_shapes_are_explained():
+    assert "time: expected a mapping of keys (key: value), got 5" in str(scene_error(modified(lambda s: s.update(time=5))))
+    assert "particles[0]: expected a mapping of keys (key: value), got nothing (null)" in str(
+        scene_error(modified(lambda s: s.update(particles=[None]))))
+    assert "1: key 1 is not a name" in str(scene_error(modified(lambda s: s.update({1: "x"}))))

@@ -343,7 +343,7 @@ _EXAMPLES = {
     "poisson_ratio": "poisson_ratio: 0.3",
     "name": "name: <a unique name>",
     "material": "material: <a name defined under materials>",
-    "radius": "radius: 0.001 (or {min: 0.0009, max: 0.0011})",
+    "radius": "radius: 0.001 or radius: {min: 0.0009, max: 0.0011}",
     "insert": "insert: {kind: lattice, region: {box: [[0,0,0],[0.05,0.05,0.1]]}, count: 1000}",
     "kind": "kind: <see the choices in docs/scene.md>",
     "box": "box: [[x0, y0, z0], [x1, y1, z1]]",
@@ -481,9 +481,15 @@ def _one_problem(path: KeyPath, item: dict, data: Any) -> _Problem:
                 "give all three components [x, y, z]" if path[-1] <= 2 else "give the full list of values",
             )
         description = _field_description(path)
-        example = _EXAMPLES.get(str(path[-1]), f"{path[-1]}: <value>")
-        fix = f"add {example}" + (f" ({description})" if description else "")
+        example = _EXAMPLES.get(str(path[-1]))
+        fix = f"add {path[-1]}: <value>" + (f" ({description})" if description else "")
+        if example:
+            fix += f", e.g. {example}"
         return _Problem(path, f"required key '{path[-1]}' is missing", fix, kind=kind)
+    if kind == "invalid_key":
+        name = str(path[-1]) if path else str(value)
+        return _Problem(path[:-1] + (name,), f"key {name} is not a name",
+                        "keys are names such as time or materials; rename it (or quote it: '1')")
     if kind in ("too_long", "too_short"):
         expected = item.get("ctx", {}).get("max_length" if kind == "too_long" else "min_length")
         count = item.get("ctx", {}).get("actual_length")
