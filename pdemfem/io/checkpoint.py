@@ -1,0 +1,445 @@
+"""Checkpoints: one HDF5 file with everything needed to continue, written atomically.
+
+    path = checkpoint_path("out/checkpoints", step)
+    write_checkpoint(path, comm, particle_arrays={"ids": ids, "positions": x, ...},   # owned rows
+                     global_arrays={"wall_positions": w},                              # same on all ranks
+                     slab_arrays={"u": (u_owned, first_row), "u_prev": (...)},        # owned slabs
+                     contact_arrays={"pairs": pairs, "shear": xi},                     # owned contacts
+                     attributes={"step": 1000, "time": 0.01, "scene_hash": h, "rng_state": json_text},
+                     keep=2)
+    checkpoint = read_checkpoint("out/checkpoints/latest.h5", comm, expected_hash=h, force=False)
+    checkpoint.attributes["step"], checkpoint.particles["positions"], checkpoint.globals, checkpoint.slabs
+
+Writing (collective):
+1. particles are sorted by global id across ranks with a parallel sort by regular
+   sampling (see `sort_rows_by_key`), so the file is identical for any rank count and
+   decomposition; contacts likewise by their (id_i, id_j) ``pairs``;
+2. every rank writes its sorted block into ``<path>.tmp-<random>`` with the mpio
+   driver at an exclusive-prefix-sum offset; the file is closed (flushed) collectively;
+3. rank 0 fsyncs it, renames it to ``path`` with os.replace (atomic), fsyncs the
+   directory, points ``latest.h5`` at it and deletes all but the newest `keep`.
+A run killed at any instant (SIGKILL, node failure) therefore leaves at worst a stale
+``*.tmp-*`` file (removed by the next write) and every named checkpoint whole.
+
+``latest.h5`` is a hard link (replaced atomically through a temporary link), not a
+symbolic link or a copy: it can never dangle when checkpoints are pruned or moved by
+hand, it costs no extra I/O or disk space (a copy would double the checkpoint's write
+time), and tools that do not follow links (rsync without -H, tar, cp) still copy a real
+file.  Where the file system has no hard links it falls back to a copy.
+
+Reading (collective): every rank opens the file read-only on its own (no collective
+HDF5 calls, so a bad file cannot hang some ranks), checks marker, format version,
+scene hash and per-dataset checksums, and takes an even split of the id-sorted rows
+(rank r of p gets rows [N r/p, N (r+1)/p)); the Simulation then migrates them to the
+ranks that own them spatially.  Hence a restart works on any rank count.  All ranks
+agree on any error and raise the same CheckpointError.
+
+File layout::
+
+    /            attrs: pdemfem_checkpoint=1, format_version, step, time, scene_hash, ...
+    /particles/<field>   (N, ...)  sorted by ids                attrs: sum64
+    /contacts/<field>    (K, ...)  sorted by pairs (lexicographic)
+    /globals/<name>      arrays identical on all ranks (walls, RNG, insertion)
+    /slabs/<name>        (M, ...)  owned slabs at caller-given offsets (FE vectors)
+
+Scaling of the id sort: memory O(N/p) per rank plus p^2 samples; one Alltoallv of the
+rows.  It replaces the simple Allgatherv of all ids (8 N bytes on every rank, which
+stops fitting at ~10^8-10^9 particles and costs an O(N log N) sort on every rank).
+The MPI counts are in rows (a contiguous datatype per row), so the limit is 2^31 rows
+per rank pair, not 2 GB.
+"""
+from __future__ import annotations
+
+import json
+import os
+import secrets
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from pdemfem.errors import CheckpointError
+from pdemfem.io import xdmf
+
+FORMAT_VERSION = 1
+MARKER = "pdemfem_checkpoint"
+LATEST = "latest.h5"
+PREFIX = "checkpoint_"
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def checkpoint_path(directory, step: int) -> Path:
+    """The conventional name: <directory>/checkpoint_<step, 12 digits>.h5 (sorts by step)."""
+    return Path(directory) / f"{PREFIX}{int(step):012d}.h5"
+
+
+# ------------------------------------------------------------ parallel sort
+
+
+def _as_key(keys) -> np.ndarray:
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    return keys.reshape(len(keys), -1)
+
+
+def _lex_order(keys: np.ndarray) -> np.ndarray:
+    """Stable order of rows of `keys` (n, k), first column most significant."""
+    if keys.shape[1] == 1:
+        return np.argsort(keys[:, 0], kind="stable")
+    return np.lexsort(keys.T[::-1])
+
+
+def _count_less(sorted_keys: np.ndarray, splitter: np.ndarray) -> int:
+    """Number of rows (already sorted) lexicographically less than `splitter`."""
+    less = np.zeros(len(sorted_keys), dtype=bool)
+    equal = np.ones(len(sorted_keys), dtype=bool)
+    for column in range(sorted_keys.shape[1]):
+        less |= equal & (sorted_keys[:, column] < splitter[column])
+        equal &= sorted_keys[:, column] == splitter[column]
+    return int(less.sum())
+
+
+def _row_type(array: np.ndarray):
+    row_bytes = array.dtype.itemsize * int(np.prod(array.shape[1:], dtype=np.int64))
+    datatype = MPI.BYTE.Create_contiguous(max(row_bytes, 1)).Commit()
+    return datatype, row_bytes
+
+
+def _exchange_rows(comm, array: np.ndarray, send_counts: np.ndarray, recv_counts: np.ndarray) -> np.ndarray:
+    """Alltoallv of the rows of `array` (grouped by destination) with row-sized MPI counts."""
+    array = np.ascontiguousarray(array)
+    received = np.empty((int(recv_counts.sum()), *array.shape[1:]), dtype=array.dtype)
+    datatype, row_bytes = _row_type(array)
+    try:
+        if row_bytes:
+            send_displs = np.concatenate([[0], np.cumsum(send_counts)[:-1]]).astype(np.int32)
+            recv_displs = np.concatenate([[0], np.cumsum(recv_counts)[:-1]]).astype(np.int32)
+            send = array.reshape(-1).view(np.uint8) if array.size else np.empty(0, np.uint8)
+            recv = received.reshape(-1).view(np.uint8) if received.size else np.empty(0, np.uint8)
+            comm.Alltoallv([send, (send_counts.astype(np.int32), send_displs), datatype],
+                           [recv, (recv_counts.astype(np.int32), recv_displs), datatype])
+    finally:
+        datatype.Free()
+    return received
+
+
+def sort_rows_by_key(comm, keys, arrays: dict) -> tuple[np.ndarray, dict]:
+    """Globally sort rows by int64 `keys` ((n,) or (n, k), lexicographic); return this rank's block.
+
+    Parallel sorting by regular sampling: local sort, p samples per rank, p - 1
+    splitters from the gathered samples, one Alltoallv of the rows, local sort.
+    Rank r's block precedes rank r+1's, so writing the blocks at prefix-sum offsets
+    gives the globally sorted table.  Equal keys stay on one rank.
+    """
+    keys = _as_key(keys)
+    order = _lex_order(keys)
+    keys = keys[order]
+    arrays = {name: np.ascontiguousarray(np.asarray(values)[order]) for name, values in arrays.items()}
+    size = comm.size
+    if size == 1:
+        return keys, arrays
+    n, width = keys.shape
+    n_samples = min(n, size)
+    samples = keys[(np.arange(n_samples) * n) // max(n_samples, 1)] if n_samples else keys[:0]
+    counts = np.zeros(size, dtype=np.int64)
+    comm.Allgather(np.array([n_samples * width], dtype=np.int64), counts)
+    gathered = np.empty(int(counts.sum()), dtype=np.int64)
+    comm.Allgatherv(np.ascontiguousarray(samples).reshape(-1),
+                    [gathered, (counts.astype(np.int32), np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int32)),
+                     MPI.INT64_T])
+    gathered = gathered.reshape(-1, width)
+    gathered = gathered[_lex_order(gathered)]
+    if len(gathered):
+        splitters = gathered[(np.arange(1, size) * len(gathered)) // size]
+        bounds = np.array([0] + [_count_less(keys, s) for s in splitters] + [n], dtype=np.int64)
+    else:
+        bounds = np.array([0] * size + [n], dtype=np.int64)
+    send_counts = np.diff(bounds)
+    recv_counts = np.zeros(size, dtype=np.int64)
+    comm.Alltoall(send_counts, recv_counts)
+    keys = _exchange_rows(comm, keys, send_counts, recv_counts)
+    arrays = {name: _exchange_rows(comm, values, send_counts, recv_counts) for name, values in arrays.items()}
+    order = _lex_order(keys)
+    return keys[order], {name: values[order] for name, values in arrays.items()}
+
+
+# ---------------------------------------------------------------- checksums
+
+
+def _sum64(array: np.ndarray) -> int:
+    """Order-independent checksum: sum of the data as uint64 words (mod 2^64), or bytes if unaligned."""
+    data = np.ascontiguousarray(array).reshape(-1).view(np.uint8)
+    if len(data) % 8 == 0:
+        return int(data.view(np.uint64).sum(dtype=np.uint64))
+    return int(data.sum(dtype=np.uint64))
+
+
+def _sum64_global(comm, array: np.ndarray) -> int:
+    buffer = np.array([_sum64(array)], dtype=np.uint64)
+    comm.Allreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)  # unsigned addition wraps modulo 2^64
+    return int(buffer[0])
+
+
+# -------------------------------------------------------------------- write
+
+
+def _encode_attributes(attributes: dict) -> tuple[dict, list]:
+    encoded, as_json = {}, []
+    for name, value in attributes.items():
+        if isinstance(value, np.generic):
+            value = value.item()
+        if isinstance(value, (bool, int, float, str)):
+            encoded[name] = value
+        else:
+            encoded[name] = json.dumps(value)
+            as_json.append(name)
+    return encoded, as_json
+
+
+def _write_table(handle, comm, group_name: str, arrays: dict, key_name: str) -> int:
+    group = handle.create_group(group_name)
+    if not arrays:
+        return 0
+    if key_name not in arrays:
+        raise KeyError(f"checkpoint {group_name}: the arrays must include {key_name!r}")
+    keys, rows = sort_rows_by_key(comm, arrays[key_name], {n: v for n, v in arrays.items()})
+    count = len(keys)
+    offset, total = xdmf.owned_offset(comm, count)
+    for name in sorted(rows):
+        values = rows[name]
+        dataset = group.create_dataset(name, shape=(total, *values.shape[1:]), dtype=values.dtype)
+        dataset.attrs["sum64"] = np.uint64(_sum64_global(comm, values))
+        xdmf.write_slab(dataset, offset, values)
+    group.attrs["count"] = total
+    return total
+
+
+def _link_latest(path: Path) -> None:
+    latest = path.with_name(LATEST)
+    temporary = path.with_name(f"{LATEST}.tmp-{secrets.token_hex(4)}")
+    try:
+        os.link(path, temporary)
+    except OSError:
+        shutil.copyfile(path, temporary)
+    os.replace(temporary, latest)
+
+
+def _prune(path: Path, keep: int) -> None:
+    """Keep `path` and the newest keep-1 other checkpoint_*.h5 files (by modification time)."""
+    others = [p for p in path.parent.glob(f"{PREFIX}*.h5") if p.name != path.name]
+    others.sort(key=lambda p: p.stat().st_mtime, reverse=True)
+    for old in others[max(keep - 1, 0):]:
+        old.unlink(missing_ok=True)
+
+
+def _fsync(path: Path, directory: bool = False) -> None:
+    fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | None = None,
+                     attributes: dict | None = None, slab_arrays: dict | None = None,
+                     contact_arrays: dict | None = None, keep: int | None = None) -> Path:
+    """Write one checkpoint atomically (collective); return its path.
+
+    particle_arrays: this rank's owned rows per field, including int64 'ids' (unique).
+    contact_arrays: this rank's contacts, including 'pairs' (K, 2) int64 (or any int64
+        key columns), stored sorted by them.
+    global_arrays: identical on every rank; rank 0's copy is written.
+    slab_arrays: name -> (owned_rows, first_global_row); the slabs of all ranks must tile
+        0..M-1 (e.g. FE vectors in a rank-count independent node numbering).
+    attributes: step, time, scene_hash, rng_state (JSON text), insertion progress, ...;
+        str/int/float/bool are stored as HDF5 attributes, anything else as JSON.
+        format_version defaults to FORMAT_VERSION.
+    keep: if given, delete all but the newest `keep` checkpoint_*.h5 in the directory
+        and point latest.h5 at this file.
+    """
+    path = Path(path)
+    xdmf.prepare_directory(path.parent, comm)
+    token = secrets.token_hex(4) if comm.rank == 0 else None
+    token = comm.bcast(token, root=0)
+    temporary = path.with_name(f"{path.name}.tmp-{token}")
+    if comm.rank == 0:  # leftovers of a run killed while writing
+        for stale in path.parent.glob(f"{PREFIX}*.h5.tmp-*"):
+            stale.unlink(missing_ok=True)
+        for stale in path.parent.glob(f"{LATEST}.tmp-*"):
+            stale.unlink(missing_ok=True)
+    comm.Barrier()
+    attributes = dict(attributes or {})
+    attributes.setdefault("format_version", FORMAT_VERSION)
+    encoded, as_json = _encode_attributes(attributes)
+    with xdmf.open_parallel(temporary, "w", comm) as handle:
+        handle.attrs[MARKER] = 1
+        for name, value in encoded.items():
+            handle.attrs[name] = value
+        handle.attrs["json_attributes"] = json.dumps(as_json)
+        handle.attrs["ranks_at_write"] = comm.size
+        _write_table(handle, comm, "particles", dict(particle_arrays), "ids")
+        _write_table(handle, comm, "contacts", dict(contact_arrays or {}), "pairs")
+        group = handle.create_group("globals")
+        for name, values in sorted((global_arrays or {}).items()):
+            values = np.ascontiguousarray(values)
+            dataset = group.create_dataset(name, shape=values.shape, dtype=values.dtype)
+            dataset.attrs["sum64"] = np.uint64(_sum64(values))
+            if comm.rank == 0 and values.size:
+                dataset[...] = values
+        group = handle.create_group("slabs")
+        for name, (values, first) in sorted((slab_arrays or {}).items()):
+            values = np.ascontiguousarray(values)
+            _, total = xdmf.owned_offset(comm, len(values))
+            dataset = group.create_dataset(name, shape=(total, *values.shape[1:]), dtype=values.dtype)
+            dataset.attrs["sum64"] = np.uint64(_sum64_global(comm, values))
+            xdmf.write_slab(dataset, int(first), values)
+    error = None
+    if comm.rank == 0:
+        try:
+            _fsync(temporary)
+            os.replace(temporary, path)
+            _fsync(path.parent, directory=True)
+            if keep is not None:
+                _link_latest(path)
+                _prune(path, int(keep))
+        except OSError as exc:
+            error = str(exc)
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise CheckpointError(str(path), f"could not install the checkpoint ({error})",
+                              "check free space and permissions of checkpoint.dir")
+    return path
+
+
+# --------------------------------------------------------------------- read
+
+
+@dataclass
+class Checkpoint:
+    path: Path
+    attributes: dict
+    particles: dict = field(default_factory=dict)   # this rank's share of the id-sorted rows
+    contacts: dict = field(default_factory=dict)    # this rank's share of the pair-sorted contacts
+    globals: dict = field(default_factory=dict)
+    slabs: dict = field(default_factory=dict)
+    particle_count: int = 0                         # global
+    particle_rows: tuple = (0, 0)                   # [first, stop) of this rank's share
+
+
+def _decode(value):
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _even_share(total: int, rank: int, size: int) -> tuple[int, int]:
+    return total * rank // size, total * (rank + 1) // size
+
+
+class _Bad(Exception):
+    def __init__(self, problem: str, fix: str):
+        super().__init__(problem)
+        self.problem, self.fix = problem, fix
+
+
+OLDER_FIX = "restart from an older checkpoint in the same directory (checkpoint_<step>.h5), or start anew"
+
+
+def _read_local(path: Path, comm, expected_hash, force: bool, expected_version: int, slab_ranges: dict):
+    import h5py
+
+    if not path.exists():
+        raise _Bad("checkpoint file not found",
+                   "give the path of an existing checkpoint, e.g. out/checkpoints/latest.h5 "
+                   "(checkpoints are written to checkpoint.dir)")
+    with open(path, "rb") as handle:
+        head = handle.read(8)
+    if head != HDF5_SIGNATURE:
+        raise _Bad("not an HDF5 file (corrupt, or not a checkpoint)", OLDER_FIX)
+    try:
+        handle = h5py.File(path, "r")
+    except OSError as exc:
+        text = str(exc)
+        problem = "file is truncated" if "truncated" in text else f"file is corrupt ({text})"
+        raise _Bad(problem, OLDER_FIX) from None
+    with handle:
+        attrs = {name: _decode(value) for name, value in handle.attrs.items()}
+        if MARKER not in attrs:
+            raise _Bad("an HDF5 file, but not a pdemfem checkpoint", "give a checkpoint_<step>.h5 or latest.h5")
+        version = attrs.get("format_version")
+        if version != expected_version:
+            raise _Bad(f"checkpoint format version {version}, this pdemfem reads version {expected_version}",
+                       "restart with the pdemfem version that wrote it, or start the run anew")
+        stored_hash = attrs.get("scene_hash")
+        if expected_hash is not None and stored_hash != expected_hash and not force:
+            raise _Bad(f"the scene's physics changed since the checkpoint was written (scene hash "
+                       f"{stored_hash}, this scene {expected_hash})",
+                       "restart with the scene that wrote it; if the change is deliberate (e.g. a new end time "
+                       "or output interval) add --force")
+        for name in json.loads(attrs.pop("json_attributes", "[]")):
+            attrs[name] = json.loads(attrs[name])
+        attrs.pop(MARKER, None)
+        result = Checkpoint(path=path, attributes=attrs)
+        checks = []  # (dataset path, stored sum, local sum, summed over ranks?)
+        for group_name, target in (("particles", result.particles), ("contacts", result.contacts)):
+            group = handle[group_name]
+            total = int(group.attrs.get("count", 0))
+            first, stop = _even_share(total, comm.rank, comm.size)
+            if group_name == "particles":
+                result.particle_count, result.particle_rows = total, (first, stop)
+            for name in sorted(group):
+                dataset = group[name]
+                target[name] = dataset[first:stop]
+                checks.append((dataset.name, int(dataset.attrs["sum64"]), _sum64(target[name]), True))
+        for name, dataset in handle["globals"].items():
+            result.globals[name] = dataset[()]
+            checks.append((dataset.name, int(dataset.attrs["sum64"]), _sum64(result.globals[name]), False))
+        for name, dataset in handle["slabs"].items():
+            if name in slab_ranges:
+                first, stop = slab_ranges[name]
+                result.slabs[name] = dataset[first:stop]
+            else:
+                result.slabs[name] = dataset[()]
+                checks.append((dataset.name, int(dataset.attrs["sum64"]), _sum64(result.slabs[name]), False))
+    return result, checks
+
+
+def read_checkpoint(path, comm, expected_hash: str | None = None, force: bool = False,
+                    expected_version: int = FORMAT_VERSION, slab_ranges: dict | None = None) -> Checkpoint:
+    """Read a checkpoint for a restart on any number of ranks (collective).
+
+    `path` may be a checkpoint file or its directory (then latest.h5 in it).  Returns the
+    attributes, this rank's even share of the id-sorted particles and pair-sorted contacts,
+    the global arrays, and the slabs (whole, or rows [first, stop) per name in slab_ranges).
+    Raises CheckpointError, on every rank alike, for a missing, truncated, corrupt or
+    foreign file, another format version, or a scene hash mismatch (unless force).
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / LATEST
+    slab_ranges = dict(slab_ranges or {})
+    result, checks, failure = None, [], None
+    try:
+        result, checks = _read_local(path, comm, expected_hash, force, expected_version, slab_ranges)
+    except _Bad as bad:
+        failure = (bad.problem, bad.fix)
+    except Exception as exc:  # h5py/HDF5 errors on reading data: damaged inside
+        failure = (f"file is corrupt ({type(exc).__name__}: {exc})", OLDER_FIX)
+    failures = comm.allgather(failure)
+    failure = next((f for f in failures if f is not None), None)
+    if failure is None:
+        # Checksums: the particle/contact shares add up over ranks (uint64 sums wrap alike).
+        local = np.array([c[2] if c[3] else 0 for c in checks], dtype=np.uint64)
+        comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+        bad = [c[0] for c, summed in zip(checks, local)
+               if (int(summed) if c[3] else c[2]) != c[1]]
+        bad_everywhere = comm.allgather(bad)
+        bad = sorted({name for names in bad_everywhere for name in names})
+        if bad:
+            failure = (f"file is corrupt (checksum mismatch in {', '.join(bad)})", OLDER_FIX)
+    if failure is not None:
+        raise CheckpointError(str(path), failure[0], failure[1])
+    return result
