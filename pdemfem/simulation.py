@@ -20,6 +20,7 @@ from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
 from pdemfem.scene.loader import load_scene, output_directory
+from pdemfem.walls.mesh import build_contributor_walls
 from pdemfem.walls.plane import PlaneWalls
 
 # The skin a scene gets when it names none, as a fraction of the smallest radius:
@@ -61,6 +62,7 @@ class Simulation:
         group_density = np.array([scene.materials[group.material].density for group in scene.particles])
         group_temperature = np.array([group.initial_temperature or 0.0 for group in scene.particles])
         count = len(inserted.radii)
+        plane_walls = [wall for wall in scene.walls if wall.kind == "plane"]
         state = ParticleState(
             ids=np.arange(count, dtype=np.int64),
             material_index=group_material[inserted.group_index] if count else np.zeros(0, np.int32),
@@ -70,12 +72,15 @@ class Simulation:
             velocities=inserted.velocities,
             angular_velocities=inserted.angular_velocities,
             temperatures=group_temperature[inserted.group_index] if count else np.zeros(0),
-            wall_count=len(scene.walls),
+            wall_count=len(plane_walls),
         )
-        walls = PlaneWalls(scene.walls, tables.material_names)
+        walls = PlaneWalls(plane_walls, tables.material_names)
+        # Mesh and cylinder walls plug into the particle system as contributors.
+        self.contributor_walls = build_contributor_walls(scene, self.base_dir, tables.material_names)
         smallest_radius = float(inserted.radii.min()) if count else 1.0
         skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
-        return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm)
+        return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm,
+                              contributors=self.contributor_walls)
 
     # ------------------------------------------------------------ stepping
     def step(self, count: int = 1) -> None:
@@ -118,7 +123,7 @@ class Simulation:
         self.comm.Barrier()
         columns = ["time", "step", "particles", "kinetic_energy", "rotational_energy", "potential_energy",
                    "elastic_energy", "dissipated_energy", "wall_work", "contacts"]
-        for name in self.particle_system.walls.names:
+        for name in (wall.name for wall in self.scene.walls):
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
         self._history = HistoryWriter(self.output_dir / "history.csv", columns, self.comm.rank == 0,
                                       append=self.step_count > 0)
@@ -132,10 +137,11 @@ class Simulation:
         system = self.particle_system
         row = {"time": self.time, "step": self.step_count, "particles": self.particle_count(),
                "contacts": system.contact_count}
-        row.update(system.energies())
-        for index, name in enumerate(system.walls.names):
+        row.update(self.energies())
+        for wall in self.scene.walls:
+            force = self.wall_force(wall.name)
             for axis, label in enumerate("xyz"):
-                row[f"force_{name}_{label}"] = system.walls.forces[index, axis]
+                row[f"force_{wall.name}_{label}"] = force[axis]
         return row
 
     def _write_history(self) -> None:
@@ -164,14 +170,29 @@ class Simulation:
 
     def wall_force(self, name: str) -> np.ndarray:
         """Total contact force the particles exert on a wall (summed over ranks)."""
+        for wall in self.contributor_walls:
+            if wall.name == name:
+                return wall.force
         walls = self.particle_system.walls
         return walls.forces[walls.index(name)].copy()
+
+    def wall_torque(self, name: str, about=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Moment about the point `about` of the particles' contact forces on a mesh or cylinder wall
+        (summed over ranks)."""
+        for wall in self.contributor_walls:
+            if wall.name == name:
+                return wall.torque(about)
+        self.particle_system.walls.index(name)  # KeyError naming the walls when unknown
+        raise ValueError(f"wall_torque: wall '{name}' is a plane; torques are reported for mesh and cylinder walls")
 
     def contact_count(self) -> int:
         return self.particle_system.contact_count
 
     def energies(self) -> dict:
-        return self.particle_system.energies()
+        energies = self.particle_system.energies()
+        # Work done on the particles by moving mesh and cylinder walls.
+        energies["wall_work"] += sum(wall.work for wall in self.contributor_walls)
+        return energies
 
 
 def _progress_bar(total_steps: int, done_steps: int, enabled: bool):

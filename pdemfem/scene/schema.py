@@ -118,14 +118,49 @@ class ParticleGroupConfig(StrictModel):
     initial_temperature: Optional[PositiveFloat] = None
 
 
+class CylinderAxis(StrictModel):
+    point: Vector3 = Field((0.0, 0.0, 0.0), description="a point on the cylinder's axis [m]")
+    direction: Vector3 = Field((0.0, 0.0, 1.0), description="axis direction (any length)")
+
+    @field_validator("direction")
+    @classmethod
+    def _nonzero(cls, direction):
+        if sum(c * c for c in direction) == 0.0:
+            raise ValueError("direction must be a non-zero vector")
+        return direction
+
+
+# The keys each wall kind reads (besides name, kind, material, velocity); see docs/walls.md.
+WALL_KIND_KEYS = {
+    "plane": ("point", "normal", "temperature"),
+    "mesh": ("file", "scale", "angular_velocity", "center", "one_sided", "smooth_angle"),
+    "cylinder": ("axis", "radius", "inside", "angular_velocity"),
+}
+
+
 class WallConfig(StrictModel):
+    """One wall: kind plane (analytic), mesh (triangle surface from a file) or cylinder (analytic)."""
+
     name: str
-    kind: Literal["plane"]
+    kind: Literal["plane", "mesh", "cylinder"]
     material: str
     point: Vector3 = (0.0, 0.0, 0.0)
     normal: Vector3 = (0.0, 0.0, 1.0)
     velocity: Vector3 = Field((0.0, 0.0, 0.0), description="prescribed wall velocity [m/s]")
     temperature: Optional[PositiveFloat] = None
+    # kind: mesh
+    file: Optional[str] = Field(None, description="surface mesh (STL, gmsh .msh, or any meshio format), relative to the scene")
+    scale: PositiveFloat = Field(1.0, description="factor applied to the file's coordinates (e.g. 0.001 for mm)")
+    center: Vector3 = Field((0.0, 0.0, 0.0), description="rotation centre at t = 0 (moves with velocity) [m]")
+    one_sided: bool = Field(False, description="contact only on the side the triangle normals point to")
+    smooth_angle: Annotated[float, Field(ge=0, lt=90)] = Field(
+        1.0, description="triangles meeting at less than this angle [deg] form one smooth patch (one contact)")
+    # kind: mesh and cylinder
+    angular_velocity: Vector3 = Field((0.0, 0.0, 0.0), description="rotation rate [rad/s] about center (mesh) or the axis point (cylinder)")
+    # kind: cylinder
+    axis: Optional[CylinderAxis] = None
+    radius: Optional[PositiveFloat] = Field(None, description="cylinder radius [m]")
+    inside: bool = Field(True, description="particles inside the cylinder (a drum or pipe); false: outside (a post)")
 
     @field_validator("normal")
     @classmethod
@@ -133,6 +168,23 @@ class WallConfig(StrictModel):
         if sum(c * c for c in normal) == 0.0:
             raise ValueError("normal must be a non-zero vector")
         return normal
+
+    @model_validator(mode="after")
+    def _kind_keys(self):
+        common = {"name", "kind", "material", "velocity"}
+        foreign = sorted(key for key in self.model_fields_set
+                         if key not in common and key not in WALL_KIND_KEYS[self.kind])
+        if foreign:
+            raise ValueError(f"kind {self.kind} does not use {', '.join(foreign)}; remove it "
+                             f"(keys of kind {self.kind}: {', '.join(sorted(common) + list(WALL_KIND_KEYS[self.kind]))})")
+        if self.kind == "mesh" and not self.file:
+            raise ValueError("kind mesh needs file: the surface mesh (e.g. file: hopper.stl)")
+        if self.kind == "cylinder":
+            if self.radius is None:
+                raise ValueError("kind cylinder needs radius: [m]")
+            if self.axis is None:
+                raise ValueError("kind cylinder needs axis: {point: [x, y, z], direction: [dx, dy, dz]}")
+        return self
 
 
 class OutputConfig(StrictModel):

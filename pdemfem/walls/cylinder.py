@@ -1,0 +1,168 @@
+"""Analytic cylinder walls (infinite length): particles inside (drum, pipe) or outside (post, roller).
+
+Geometry per particle: rho = radial part of (x - axis point); inside, the gap to
+the surface is R - |rho| and the normal points to the axis; outside, the gap is
+|rho| - R and the normal points away from it.  The contact law is the shared one
+(pdemfem.contact.forces.contact_response) with the wall as a flat rigid body
+(R = inf, m = inf, the convention plane walls use): the curvature of the
+cylinder is ignored in R*, which is accurate when R >> r (a drum) and
+underestimates the stiffness of an outside contact with a thin post.
+
+Motion: the axis point moves with `velocity`; `angular_velocity` rotates the
+surface about the axis point (parallel to the axis: a rotating drum whose surface
+drags the particles; otherwise the axis direction turns too).  The contact's
+relative velocity uses the surface velocity v + w x (q - axis point) at the
+contact point q.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from pdemfem.contact.forces import contact_response, released_spring_energy
+from pdemfem.walls.mesh import ContributorWall, rotation_matrix
+from pdemfem.walls.triangle_contact import SLOT_COLUMNS
+
+
+@njit(cache=True)
+def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velocity, angular_velocity,
+                    wall_material, history, positions, velocities, angular_velocities, radii, mass,
+                    inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping, friction,
+                    rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt,
+                    rolling_enabled, forces, torques, totals):
+    """Add the cylinder's contact forces on particles [first, last); history (count, 1, 4) per particle.
+
+    Returns (elastic, dissipated, contacts, work done on the particles)."""
+    elastic_total = 0.0
+    dissipated_total = 0.0
+    work = 0.0
+    contacts = 0
+    ex = direction[0]
+    ey = direction[1]
+    ez = direction[2]
+    for i in range(first, last):
+        radius = radii[i]
+        rx = positions[i, 0] - point[0]
+        ry = positions[i, 1] - point[1]
+        rz = positions[i, 2] - point[2]
+        axial = rx * ex + ry * ey + rz * ez
+        rx -= axial * ex
+        ry -= axial * ey
+        rz -= axial * ez
+        rho = math.sqrt(rx * rx + ry * ry + rz * rz)
+        distance = 0.0
+        nx = 0.0
+        ny = 0.0
+        nz = 0.0
+        touching = rho > 0.0
+        if touching:
+            if inside:
+                distance = cylinder_radius - rho
+                nx = -rx / rho
+                ny = -ry / rho
+                nz = -rz / rho
+            else:
+                distance = rho - cylinder_radius
+                nx = rx / rho
+                ny = ry / rho
+                nz = rz / rho
+            touching = distance < radius
+        material_i = material_index[i]
+        if not touching:
+            xi_squared = history[i, 0, 0] ** 2 + history[i, 0, 1] ** 2 + history[i, 0, 2] ** 2
+            if xi_squared > 0.0:
+                dissipated_total += released_spring_energy(
+                    model_code[material_i, wall_material], history[i, 0, 3], xi_squared, mass[i], radius,
+                    effective_modulus[material_i, wall_material], effective_shear_modulus[material_i, wall_material],
+                    normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
+                    characteristic_speed)
+            for column in range(SLOT_COLUMNS):
+                history[i, 0, column] = 0.0
+            continue
+        lever = distance
+        qx = positions[i, 0] - lever * nx
+        qy = positions[i, 1] - lever * ny
+        qz = positions[i, 2] - lever * nz
+        # Surface velocity at q: v + w x (q - point).
+        ax = qx - point[0]
+        ay = qy - point[1]
+        az = qz - point[2]
+        sx = velocity[0] + angular_velocity[1] * az - angular_velocity[2] * ay
+        sy = velocity[1] + angular_velocity[2] * ax - angular_velocity[0] * az
+        sz = velocity[2] + angular_velocity[0] * ay - angular_velocity[1] * ax
+        wx = angular_velocities[i, 0]
+        wy = angular_velocities[i, 1]
+        wz = angular_velocities[i, 2]
+        vx = velocities[i, 0] - sx - lever * (wy * nz - wz * ny)
+        vy = velocities[i, 1] - sy - lever * (wz * nx - wx * nz)
+        vz = velocities[i, 2] - sz - lever * (wx * ny - wy * nx)
+        overlap = radius - distance
+        fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
+            nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, mass[i], radius,
+            effective_modulus[material_i, wall_material], effective_shear_modulus[material_i, wall_material],
+            damping[material_i, wall_material], friction[material_i, wall_material],
+            rolling_friction[material_i, wall_material], model_code[material_i, wall_material],
+            normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
+            characteristic_speed, 1.0 / inverse_inertia[i], history[i], 0, dt, rolling_enabled)
+        history[i, 0, 3] = overlap
+        elastic_total += elastic
+        dissipated_total += dissipated
+        work += (fx * sx + fy * sy + fz * sz) * dt
+        contacts += 1
+        forces[i, 0] += fx
+        forces[i, 1] += fy
+        forces[i, 2] += fz
+        torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
+        torques[i, 1] += -lever * (nz * fx - nx * fz) + my
+        torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
+        totals[0] -= fx
+        totals[1] -= fy
+        totals[2] -= fz
+        totals[3] += -(qy * fz - qz * fy) - mx
+        totals[4] += -(qz * fx - qx * fz) - my
+        totals[5] += -(qx * fy - qy * fx) - mz
+    return elastic_total, dissipated_total, contacts, work
+
+
+class CylinderWall(ContributorWall):
+    """An infinite analytic cylinder (see module docstring); a ParticleSystem contributor."""
+
+    def __init__(self, name: str, point, direction, radius: float, inside: bool, material_index: int,
+                 velocity=(0.0, 0.0, 0.0), angular_velocity=(0.0, 0.0, 0.0)):
+        super().__init__(name)
+        self.reference_point = np.asarray(point, dtype=float).reshape(3)
+        direction = np.asarray(direction, dtype=float).reshape(3)
+        self.reference_direction = direction / np.linalg.norm(direction)
+        self.radius = float(radius)
+        self.inside = bool(inside)
+        self.material_index = int(material_index)
+        self.velocity = np.asarray(velocity, dtype=float).reshape(3)
+        self.angular_velocity = np.asarray(angular_velocity, dtype=float).reshape(3)
+        self.time = 0.0
+        self.point = self.reference_point.copy()
+        self.direction = self.reference_direction.copy()
+        self.contact_count = 0
+
+    def move(self, dt: float) -> None:
+        self.time += dt
+        self.point = self.reference_point + self.time * self.velocity
+        self.direction = rotation_matrix(self.angular_velocity * self.time) @ self.reference_direction
+
+    def add_forces(self, system, first: int, last: int):
+        state, tables = system.state, system.tables
+        history = self._field(state, f"wall:{self.name}:history", (1, SLOT_COLUMNS), np.float64, 0.0)
+        self.totals[:] = 0.0
+        elastic, dissipated, contacts, work = cylinder_forces(
+            first, last, self.point, self.direction, self.radius, self.inside, self.velocity, self.angular_velocity,
+            self.material_index, history, state.positions, state.velocities, state.angular_velocities,
+            state.radii, state.mass, state.inverse_inertia, state.material_index,
+            tables.effective_modulus, tables.effective_shear_modulus, tables.damping_coefficient, tables.friction,
+            tables.rolling_friction, tables.model_code, tables.normal_stiffness, tables.tangential_ratio,
+            tables.characteristic_speed, system.dt, tables.rolling_enabled, state.forces, state.torques,
+            self.totals)
+        self.contact_count = int(contacts)
+        self._step_work = float(work)
+        self.work += self._step_work
+        return elastic, dissipated, contacts

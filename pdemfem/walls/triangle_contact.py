@@ -1,0 +1,409 @@
+"""Sphere-triangle contact: closest point with face/edge/vertex regions, one contact per smooth patch.
+
+Kernels on flat arrays (numba, cache=True); Python never loops over particles.
+
+Geometry.  `closest_point` (Ericson, Real-Time Collision Detection 5.1.5) returns the
+point of a triangle nearest a sphere centre, its barycentric weights and the
+Voronoi region it lies in: REGION_FACE (interior), an edge, or a vertex.
+
+One contact per smooth patch.  Triangles are grouped into patches (connected sets
+of triangles meeting at less than `smooth_angle`, see pdemfem.walls.mesh).  For each
+sphere, every candidate triangle closer than the radius proposes a contact for its
+patch, and the patch keeps the nearest one.  On a flat patch this is exactly the
+analytic plane: in a face region the distance is the plane distance (c - a) . n,
+and a triangle whose closest point lies on a shared edge or vertex is never
+nearer than the triangle the centre projects into, so the edges between triangles
+of a patch are invisible (same force, no bumps; tested against PlaneWalls).
+
+Between patches.  A patch whose nearest point lies in a face region always
+contributes (a concave corner: one contact per face).  A patch whose nearest point
+lies on an edge or vertex (a *feature* contact) contributes only when no contact
+already kept -- face contacts first, then feature contacts from the deepest --
+belongs to a patch that also contains that feature: at a convex edge or vertex the
+patches meeting there all report the same point and only one contact is kept, and
+a sphere resting on a face near a convex edge does not also feel the edge of the
+neighbouring face.  An edge or vertex that only one patch owns (the rim of a finite
+plate) is a genuine contact.
+
+History.  Each particle has K slots per mesh (patch id, xi[3], last overlap) in
+ParticleState.fields, so the tangential spring follows the patch, not the
+triangle: rolling across triangles of one patch carries it on unchanged.
+
+Force reporting.  Every contact is recorded with its triangle, the barycentric
+weights of the contact point and the force on the wall, and (optionally) the
+force is spread onto the triangle's vertices by those weights, which preserves
+total force and moment exactly (the moment because the contact point is the
+weighted vertex sum).  The FE coupling uses this to load the solid's nodes.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from pdemfem.contact.forces import contact_response, released_spring_energy
+
+REGION_FACE = 0
+REGION_EDGE_AB = 1
+REGION_EDGE_BC = 2
+REGION_EDGE_CA = 3
+REGION_VERTEX_A = 4
+REGION_VERTEX_B = 5
+REGION_VERTEX_C = 6
+
+# Columns of the per-particle slot history: tangential spring xi (3) and the overlap of the last step.
+SLOT_COLUMNS = 4
+
+
+@njit(inline="always", cache=True)
+def closest_point(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """Closest point of triangle abc to p: (qx, qy, qz, wa, wb, wc, region); q = wa a + wb b + wc c."""
+    abx = bx - ax
+    aby = by - ay
+    abz = bz - az
+    acx = cx - ax
+    acy = cy - ay
+    acz = cz - az
+    apx = px - ax
+    apy = py - ay
+    apz = pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return ax, ay, az, 1.0, 0.0, 0.0, REGION_VERTEX_A
+    bpx = px - bx
+    bpy = py - by
+    bpz = pz - bz
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return bx, by, bz, 0.0, 1.0, 0.0, REGION_VERTEX_B
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return ax + v * abx, ay + v * aby, az + v * abz, 1.0 - v, v, 0.0, REGION_EDGE_AB
+    cpx = px - cx
+    cpy = py - cy
+    cpz = pz - cz
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return cx, cy, cz, 0.0, 0.0, 1.0, REGION_VERTEX_C
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return ax + w * acx, ay + w * acy, az + w * acz, 1.0 - w, 0.0, w, REGION_EDGE_CA
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return (bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz), 0.0, 1.0 - w, w, REGION_EDGE_BC)
+    denominator = va + vb + vc
+    if denominator <= 0.0:
+        # Degenerate (zero-area) triangle: fall back to vertex a.
+        return ax, ay, az, 1.0, 0.0, 0.0, REGION_VERTEX_A
+    v = vb / denominator
+    w = vc / denominator
+    return (ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w, 1.0 - v - w, v, w, REGION_FACE)
+
+
+@njit(cache=True)
+def point_triangle_distance_squared(px, py, pz, vertices, triangles, t):
+    a = triangles[t, 0]
+    b = triangles[t, 1]
+    c = triangles[t, 2]
+    qx, qy, qz, wa, wb, wc, region = closest_point(
+        px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2], vertices[b, 0], vertices[b, 1],
+        vertices[b, 2], vertices[c, 0], vertices[c, 1], vertices[c, 2])
+    return (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+
+
+@njit(inline="always", cache=True)
+def _vertex_in_patch(vertex, patch, vertex_patch_offsets, vertex_patches):
+    for k in range(vertex_patch_offsets[vertex], vertex_patch_offsets[vertex + 1]):
+        if vertex_patches[k] == patch:
+            return True
+    return False
+
+
+@njit(cache=True)
+def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
+                        vertices, vertex_velocities, triangles, triangle_patch,
+                        vertex_patch_offsets, vertex_patches, one_sided, wall_material,
+                        slot_patch, slot_history,
+                        positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
+                        effective_modulus, effective_shear_modulus, damping, friction, rolling_friction,
+                        model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt, rolling_enabled,
+                        forces, torques, totals, spread_to_vertices, vertex_forces,
+                        record_particle, record_triangle, record_weights, record_point, record_force,
+                        scratch_int, scratch_float, spare_history):
+    """Add the mesh-wall contact forces of particles [first, last).
+
+    totals[0:3] += force on the wall, totals[3:6] += its moment about the origin
+    (sum of q x F_wall minus the rolling couples).  One record per contact
+    (particle index, triangle, barycentric weights, contact point, force on the
+    wall).  scratch_int (M, 5) / scratch_float (M, 8) hold the per-patch
+    proposals of one particle (M >= the longest candidate list).
+    Returns (elastic, dissipated, contacts, work done on the particles by the wall).
+    """
+    elastic_total = 0.0
+    dissipated_total = 0.0
+    work = 0.0
+    contacts = 0
+    slots = slot_patch.shape[1]
+    for i in range(first, last):
+        px = positions[i, 0]
+        py = positions[i, 1]
+        pz = positions[i, 2]
+        radius = radii[i]
+        radius_squared = radius * radius
+        proposals = 0
+        # ---- nearest point of each patch among the candidate triangles
+        for k in range(candidate_offsets[i], candidate_offsets[i + 1]):
+            t = candidate_triangles[k]
+            a = triangles[t, 0]
+            b = triangles[t, 1]
+            c = triangles[t, 2]
+            ax = vertices[a, 0]
+            ay = vertices[a, 1]
+            az = vertices[a, 2]
+            bx = vertices[b, 0]
+            by = vertices[b, 1]
+            bz = vertices[b, 2]
+            cx = vertices[c, 0]
+            cy = vertices[c, 1]
+            cz = vertices[c, 2]
+            qx, qy, qz, wa, wb, wc, region = closest_point(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
+            dx = px - qx
+            dy = py - qy
+            dz = pz - qz
+            distance_squared = dx * dx + dy * dy + dz * dz
+            if distance_squared >= radius_squared:
+                continue
+            # Unit normal of the triangle (right-hand rule a -> b -> c).
+            nx = (by - ay) * (cz - az) - (bz - az) * (cy - ay)
+            ny = (bz - az) * (cx - ax) - (bx - ax) * (cz - az)
+            nz = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+            length = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if length == 0.0:
+                continue
+            nx /= length
+            ny /= length
+            nz /= length
+            signed = (px - ax) * nx + (py - ay) * ny + (pz - az) * nz
+            if one_sided and signed < 0.0:
+                continue
+            if region == REGION_FACE:
+                # The plane distance, exactly as an analytic plane computes it.
+                distance = abs(signed)
+                if signed < 0.0:
+                    nx = -nx
+                    ny = -ny
+                    nz = -nz
+            else:
+                distance = math.sqrt(distance_squared)
+                if distance > 0.0:
+                    nx = dx / distance
+                    ny = dy / distance
+                    nz = dz / distance
+            patch = triangle_patch[t]
+            slot = -1
+            for j in range(proposals):
+                if scratch_int[j, 0] == patch:
+                    slot = j
+                    break
+            if slot < 0:
+                slot = proposals
+                proposals += 1
+            elif distance >= scratch_float[slot, 0]:
+                continue
+            scratch_int[slot, 0] = patch
+            scratch_int[slot, 1] = t
+            scratch_int[slot, 2] = region
+            # The feature the point lies on (vertices), -1 when unused.
+            if region == REGION_FACE:
+                scratch_int[slot, 3] = -1
+                scratch_int[slot, 4] = -1
+            elif region == REGION_EDGE_AB:
+                scratch_int[slot, 3] = a
+                scratch_int[slot, 4] = b
+            elif region == REGION_EDGE_BC:
+                scratch_int[slot, 3] = b
+                scratch_int[slot, 4] = c
+            elif region == REGION_EDGE_CA:
+                scratch_int[slot, 3] = c
+                scratch_int[slot, 4] = a
+            elif region == REGION_VERTEX_A:
+                scratch_int[slot, 3] = a
+                scratch_int[slot, 4] = -1
+            elif region == REGION_VERTEX_B:
+                scratch_int[slot, 3] = b
+                scratch_int[slot, 4] = -1
+            else:
+                scratch_int[slot, 3] = c
+                scratch_int[slot, 4] = -1
+            scratch_float[slot, 0] = distance
+            scratch_float[slot, 1] = nx
+            scratch_float[slot, 2] = ny
+            scratch_float[slot, 3] = nz
+            scratch_float[slot, 4] = wa
+            scratch_float[slot, 5] = wb
+            scratch_float[slot, 6] = wc
+            # Column 7: 1 kept, 0 undecided, -1 dropped.
+            scratch_float[slot, 7] = 1.0 if region == REGION_FACE else 0.0
+
+        # ---- feature contacts, deepest first, unless a kept contact's patch owns the feature
+        while True:
+            best = -1
+            for j in range(proposals):
+                if scratch_float[j, 7] == 0.0 and (best < 0 or scratch_float[j, 0] < scratch_float[best, 0]):
+                    best = j
+            if best < 0:
+                break
+            f0 = scratch_int[best, 3]
+            f1 = scratch_int[best, 4]
+            covered = False
+            for j in range(proposals):
+                if scratch_float[j, 7] == 1.0:
+                    patch = scratch_int[j, 0]
+                    if _vertex_in_patch(f0, patch, vertex_patch_offsets, vertex_patches) and (
+                            f1 < 0 or _vertex_in_patch(f1, patch, vertex_patch_offsets, vertex_patches)):
+                        covered = True
+                        break
+            scratch_float[best, 7] = -1.0 if covered else 1.0
+
+        # ---- history slots: match kept patches, release the others, then open new ones
+        for s in range(slots):
+            patch = slot_patch[i, s]
+            if patch < 0:
+                continue
+            matched = False
+            for j in range(proposals):
+                if scratch_float[j, 7] == 1.0 and scratch_int[j, 0] == patch:
+                    matched = True
+                    break
+            if not matched:
+                xi_squared = slot_history[i, s, 0] ** 2 + slot_history[i, s, 1] ** 2 + slot_history[i, s, 2] ** 2
+                if xi_squared > 0.0:
+                    material_i = material_index[i]
+                    dissipated_total += released_spring_energy(
+                        model_code[material_i, wall_material], slot_history[i, s, 3], xi_squared, mass[i], radius,
+                        effective_modulus[material_i, wall_material],
+                        effective_shear_modulus[material_i, wall_material],
+                        normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
+                        characteristic_speed)
+                slot_patch[i, s] = -1
+                for column in range(SLOT_COLUMNS):
+                    slot_history[i, s, column] = 0.0
+
+        for j in range(proposals):
+            if scratch_float[j, 7] != 1.0:
+                continue
+            patch = scratch_int[j, 0]
+            t = scratch_int[j, 1]
+            distance = scratch_float[j, 0]
+            nx = scratch_float[j, 1]
+            ny = scratch_float[j, 2]
+            nz = scratch_float[j, 3]
+            wa = scratch_float[j, 4]
+            wb = scratch_float[j, 5]
+            wc = scratch_float[j, 6]
+            slot = -1
+            for s in range(slots):
+                if slot_patch[i, s] == patch:
+                    slot = s
+                    break
+            if slot < 0:
+                for s in range(slots):
+                    if slot_patch[i, s] < 0:
+                        slot = s
+                        slot_patch[i, s] = patch
+                        break
+            history = slot_history[i]
+            if slot < 0:
+                # More simultaneous contacts than slots: this one runs without history.
+                history = spare_history
+                for column in range(SLOT_COLUMNS):
+                    spare_history[0, column] = 0.0
+                slot = 0
+            a = triangles[t, 0]
+            b = triangles[t, 1]
+            c = triangles[t, 2]
+            # The contact point on the surface (`distance` below the centre), as the weighted vertex sum so
+            # that spreading the force by the weights reproduces its moment exactly.
+            qx = wa * vertices[a, 0] + wb * vertices[b, 0] + wc * vertices[c, 0]
+            qy = wa * vertices[a, 1] + wb * vertices[b, 1] + wc * vertices[c, 1]
+            qz = wa * vertices[a, 2] + wb * vertices[b, 2] + wc * vertices[c, 2]
+            # Surface velocity at the contact point: barycentric interpolation (exact for rigid motion).
+            sx = wa * vertex_velocities[a, 0] + wb * vertex_velocities[b, 0] + wc * vertex_velocities[c, 0]
+            sy = wa * vertex_velocities[a, 1] + wb * vertex_velocities[b, 1] + wc * vertex_velocities[c, 1]
+            sz = wa * vertex_velocities[a, 2] + wb * vertex_velocities[b, 2] + wc * vertex_velocities[c, 2]
+            wx = angular_velocities[i, 0]
+            wy = angular_velocities[i, 1]
+            wz = angular_velocities[i, 2]
+            lever = distance
+            vx = velocities[i, 0] - sx - lever * (wy * nz - wz * ny)
+            vy = velocities[i, 1] - sy - lever * (wz * nx - wx * nz)
+            vz = velocities[i, 2] - sz - lever * (wx * ny - wy * nx)
+            material_i = material_index[i]
+            overlap = radius - distance
+            fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
+                nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, mass[i], radius,
+                effective_modulus[material_i, wall_material], effective_shear_modulus[material_i, wall_material],
+                damping[material_i, wall_material], friction[material_i, wall_material],
+                rolling_friction[material_i, wall_material], model_code[material_i, wall_material],
+                normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
+                characteristic_speed, 1.0 / inverse_inertia[i], history, slot, dt, rolling_enabled)
+            history[slot, 3] = overlap
+            elastic_total += elastic
+            dissipated_total += dissipated
+            work += (fx * sx + fy * sy + fz * sz) * dt
+            forces[i, 0] += fx
+            forces[i, 1] += fy
+            forces[i, 2] += fz
+            torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
+            torques[i, 1] += -lever * (nz * fx - nx * fz) + my
+            torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
+            # The wall gets -F at q and the opposite rolling couple.
+            totals[0] -= fx
+            totals[1] -= fy
+            totals[2] -= fz
+            totals[3] += -(qy * fz - qz * fy) - mx
+            totals[4] += -(qz * fx - qx * fz) - my
+            totals[5] += -(qx * fy - qy * fx) - mz
+            if contacts < record_particle.shape[0]:
+                record_particle[contacts] = i
+                record_triangle[contacts] = t
+                record_weights[contacts, 0] = wa
+                record_weights[contacts, 1] = wb
+                record_weights[contacts, 2] = wc
+                record_point[contacts, 0] = qx
+                record_point[contacts, 1] = qy
+                record_point[contacts, 2] = qz
+                record_force[contacts, 0] = -fx
+                record_force[contacts, 1] = -fy
+                record_force[contacts, 2] = -fz
+            if spread_to_vertices:
+                vertex_forces[a, 0] -= wa * fx
+                vertex_forces[a, 1] -= wa * fy
+                vertex_forces[a, 2] -= wa * fz
+                vertex_forces[b, 0] -= wb * fx
+                vertex_forces[b, 1] -= wb * fy
+                vertex_forces[b, 2] -= wb * fz
+                vertex_forces[c, 0] -= wc * fx
+                vertex_forces[c, 1] -= wc * fy
+                vertex_forces[c, 2] -= wc * fz
+            contacts += 1
+    return elastic_total, dissipated_total, contacts, work
+
+
+@njit(cache=True)
+def largest_displacement(current, reference, first, last):
+    """max |current[k] - reference[k]| over rows [first, last)."""
+    largest = 0.0
+    for k in range(first, last):
+        d = ((current[k, 0] - reference[k, 0]) ** 2 + (current[k, 1] - reference[k, 1]) ** 2
+             + (current[k, 2] - reference[k, 2]) ** 2)
+        if d > largest:
+            largest = d
+    return math.sqrt(largest)
