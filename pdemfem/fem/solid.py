@@ -387,6 +387,11 @@ class Solid:
     def original_cell_ids(self) -> np.ndarray:
         return self.mesh.original_cell_ids
 
+    @property
+    def constrained_dofs(self) -> np.ndarray:
+        """Owned dofs (3 per node, x y z) held by fixed or prescribed groups, as a boolean mask (copy)."""
+        return self._constrained.copy()
+
     def set_state(self, displacements, velocities) -> None:
         """Not collective: owned displacements and half-step velocities (n_owned, 3), e.g. from a checkpoint."""
         self.displacement_vec.setArray(np.asarray(displacements, float).ravel())
