@@ -1,0 +1,47 @@
+"""MPI case: the dense colliding DEM scene, gathered by particle id (tests/test_dem_parallel.py).
+
+usage: dem_agreement.py OUT.npz STEPS [ulp]
+Writes (rank 0) positions and velocities sorted by id, the contact count and every
+wall force after STEPS steps.  "ulp" (serial only) shifts particle 0 by one unit in
+the last place of its x coordinate before the run: the round-off growth reference.
+"""
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+import pdemfem  # noqa: F401,E402  (environment first)
+from mpi4py import MPI  # noqa: E402
+
+from dem_scenes import dense_scene  # noqa: E402
+from pdemfem import Simulation  # noqa: E402
+
+
+def main():
+    out, steps = sys.argv[1], int(sys.argv[2])
+    perturb = len(sys.argv) > 3 and sys.argv[3] == "ulp"
+    comm = MPI.COMM_WORLD
+    sim = Simulation.from_dict(dense_scene(count=200), comm=comm, output_dir=str(Path(out).parent / "unused"))
+    if perturb:
+        state = sim.particle_system.state
+        row = np.nonzero(state.ids == 0)[0]
+        state.positions[row, 0] += np.spacing(state.positions[row, 0])
+    sim.step(steps)
+    p = sim.particles
+    ids = comm.gather(p.ids, root=0)
+    positions = comm.gather(p.positions, root=0)
+    velocities = comm.gather(p.velocities, root=0)
+    walls = sim.particle_system.walls.names
+    forces = np.array([sim.wall_force(name) for name in walls])
+    contacts = sim.contact_count()
+    if comm.rank == 0:
+        ids = np.concatenate(ids)
+        order = np.argsort(ids)
+        np.savez(out, ids=ids[order], positions=np.concatenate(positions)[order],
+                 velocities=np.concatenate(velocities)[order], wall_forces=forces, contacts=contacts,
+                 ranks=comm.size, dt=sim.dt)
+
+
+if __name__ == "__main__":
+    main()
