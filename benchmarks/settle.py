@@ -1,0 +1,533 @@
+"""Settle benchmark: pdemfem against LIGGGHTS on the same granular scene.
+
+28,000 glass spheres (d = 2 mm, rho = 2500 kg/m^3, E = 5 MPa, nu = 0.3), Hertz-Mindlin
+with tangential history, e = 0.5, mu = 0.5, settling under gravity in a 60 x 60 x 120 mm
+box of five plane walls (floor z = 0, four sides, open top) from a jittered simple-cubic
+lattice of spacing 2.4 mm, dt = 2e-5 s, Verlet skin 0.3 r.
+
+    python benchmarks/settle.py                       # 28,000 particles, 10,000 steps
+    python benchmarks/settle.py --steps 2000          # quicker, mostly free fall
+    python benchmarks/settle.py --pre-steps 8000 --steps 2000   # time the settled bed only
+    python benchmarks/settle.py --particles 262144    # larger box, same packing
+    python benchmarks/settle.py --ranks 2             # pdemfem and LIGGGHTS on 2 MPI ranks
+
+It builds the scene through pdemfem's public Python API, compiles the kernels on a
+tiny copy of the scene, takes `--warmup` untimed steps, then `--pre-steps` untimed
+steps, then times `--steps` steps in chunks of `--sample-every`, sampling the
+contact count between chunks.  When `liggghts` is on PATH it runs
+benchmarks/settle_liggghts.in with the same particle count, lattice and number of
+untimed steps, and prints the ratio pdemfem / LIGGGHTS measured in the same run.
+All figures go to a JSON file (default benchmarks/results/settle.json).
+See docs/performance.md for what every figure means.
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import math
+import os
+import platform
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPOSITORY = HERE.parent
+DECK = HERE / "settle_liggghts.in"
+DEFAULT_JSON = HERE / "results" / "settle.json"
+
+# The scene (SI units).  Changing anything here means changing settle_liggghts.in too.
+DIAMETER = 0.002
+RADIUS = DIAMETER / 2
+SPACING = 0.0024
+GAP = SPACING - DIAMETER
+DENSITY = 2500.0
+YOUNGS_MODULUS = 5.0e6
+POISSON_RATIO = 0.3
+RESTITUTION = 0.5
+FRICTION = 0.5
+DT = 2.0e-5
+JITTER = 0.2            # lattice jitter as a fraction of the gap (pdemfem's `jitter`)
+SKIN = 0.3 * RADIUS
+REFERENCE_PARTICLES = 28000
+REFERENCE_SITES_PER_SIDE = 25   # 25 * 2.4 mm = 60 mm
+REFERENCE_HEIGHT = 0.12
+LIGGGHTS_SEED = 15485863        # LIGGGHTS wants a prime > 10000
+WORKER_FLAG = "--worker-json"
+
+
+# ----------------------------------------------------------------------------- geometry
+def geometry(particles: int) -> dict:
+    """Box and lattice for `particles`: the footprint scales to keep the fill height.
+
+    The lattice has sites at (i + 1/2) * spacing along every axis and is filled x
+    fastest, then y, then z, so both codes start from the same sites (the jitter is
+    drawn by each code's own generator).
+    """
+    sites = max(1, round(REFERENCE_SITES_PER_SIDE * math.sqrt(particles / REFERENCE_PARTICLES)))
+    per_layer = sites * sites
+    layers = math.ceil(particles / per_layer)
+    side = sites * SPACING
+    height = max(REFERENCE_HEIGHT, (layers + 1) * SPACING)
+    return {"sites_per_side": sites, "layers": layers, "side": side, "height": height}
+
+
+def scene_dict(particles: int, seed: int = 1) -> dict:
+    g = geometry(particles)
+    side, height = g["side"], g["height"]
+    low = GAP / 2  # pdemfem puts the first site at low + r: this makes it (1/2) * spacing
+    return {
+        "time": {"end": 1.0, "dt": DT},
+        "gravity": [0.0, 0.0, -9.81],
+        "materials": {"glass": {"density": DENSITY, "youngs_modulus": YOUNGS_MODULUS,
+                                "poisson_ratio": POISSON_RATIO}},
+        "interactions": {"default": {"model": "hertz_mindlin", "restitution": RESTITUTION,
+                                     "friction": FRICTION, "rolling_friction": 0.0}},
+        "particles": [{
+            "name": "grains", "material": "glass", "radius": RADIUS,
+            "insert": {"kind": "lattice", "region": {"box": [[low, low, low], [side, side, height]]},
+                       "count": particles, "spacing": SPACING, "jitter": JITTER, "seed": seed},
+        }],
+        "walls": [
+            {"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1], "material": "glass"},
+            {"name": "x_low", "kind": "plane", "point": [0, 0, 0], "normal": [1, 0, 0], "material": "glass"},
+            {"name": "x_high", "kind": "plane", "point": [side, 0, 0], "normal": [-1, 0, 0], "material": "glass"},
+            {"name": "y_low", "kind": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": "glass"},
+            {"name": "y_high", "kind": "plane", "point": [0, side, 0], "normal": [0, -1, 0], "material": "glass"},
+        ],
+        "neighbors": {"skin": SKIN},
+        "output": {"dir": "out", "every": 1.0},
+    }
+
+
+# ----------------------------------------------------------------------------- helpers
+def current_rss() -> int:
+    """Resident set size of this process in bytes (Linux), else peak RSS."""
+    try:
+        with open("/proc/self/statm") as handle:
+            return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except OSError:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def array_bytes(*objects) -> int:
+    """Bytes of every numpy array held directly by `objects` (the solver's state)."""
+    import numpy as np
+
+    total = 0
+    for item in objects:
+        for value in vars(item).values():
+            if isinstance(value, np.ndarray):
+                total += value.nbytes
+    return total
+
+
+class _Timers:
+    """Wall time spent in named functions of pdemfem.particles.system (where the time goes)."""
+
+    def __init__(self):
+        self.seconds = {}
+        self.calls = {}
+        self._restore = []
+
+    def wrap(self, owner, attribute: str, label: str) -> bool:
+        original = getattr(owner, attribute, None)
+        if original is None:
+            return False
+
+        def timed(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                self.seconds[label] = self.seconds.get(label, 0.0) + time.perf_counter() - start
+                self.calls[label] = self.calls.get(label, 0) + 1
+
+        setattr(owner, attribute, timed)
+        self._restore.append((owner, attribute, original))
+        return True
+
+    def reset(self):
+        self.seconds.clear()
+        self.calls.clear()
+
+    def unwrap(self):
+        for owner, attribute, original in reversed(self._restore):
+            setattr(owner, attribute, original)
+        self._restore.clear()
+
+
+# ----------------------------------------------------------------------------- pdemfem
+def run_pdemfem(args) -> dict:
+    """Build, warm up and time pdemfem; every rank calls this, rank 0's dict is the result."""
+    import numpy as np
+    from mpi4py import MPI
+
+    from pdemfem import Simulation
+    import pdemfem.particles.system as system_module
+
+    comm = MPI.COMM_WORLD
+    rank, ranks = comm.rank, comm.size
+    with tempfile.TemporaryDirectory(prefix="settle-bench-") as scratch:
+        # Compile (or load from numba's cache) every kernel on a tiny copy of the scene,
+        # so neither compile time nor LLVM's memory lands in the figures.
+        compile_start = time.perf_counter()
+        tiny = Simulation.from_dict(scene_dict(27), comm=comm, output_dir=os.path.join(scratch, "tiny"))
+        tiny.step(3)
+        compile_seconds = time.perf_counter() - compile_start
+        del tiny
+        gc.collect()
+
+        rss_before = current_rss()
+        build_start = time.perf_counter()
+        sim = Simulation.from_dict(scene_dict(args.particles), comm=comm, output_dir=os.path.join(scratch, "out"))
+        build_seconds = time.perf_counter() - build_start
+        particles = sim.particle_count()
+
+        timers = _Timers()
+        if args.breakdown:
+            system = sim.particle_system
+            timers.wrap(system_module, "pair_forces", "pair contacts")
+            timers.wrap(system_module, "plane_wall_forces", "wall contacts")
+            timers.wrap(system, "_rebuild", "neighbour list rebuild + sort")
+            timers.wrap(system, "_compute_forces", "_compute_forces")
+
+        sim.step(args.warmup + args.pre_steps)
+        if comm.size > 1:
+            comm.Barrier()
+        timers.reset()
+
+        has_contact_count = hasattr(sim, "contact_count")
+        samples = []
+
+        def sample():
+            energies = sim.energies() if hasattr(sim, "energies") else {}
+            samples.append({
+                "step": sim.step_count if hasattr(sim, "step_count") else None,
+                "contacts": int(sim.contact_count()) if has_contact_count else None,
+                "kinetic_energy": energies.get("kinetic_energy"),
+                "rotational_energy": energies.get("rotational_energy"),
+            })
+
+        sample()
+        stepped, seconds, cpu_seconds = 0, 0.0, 0.0
+        while stepped < args.steps:
+            # Samples fall on multiples of --sample-every, as LIGGGHTS' thermo rows do.
+            chunk = min(args.sample_every - sim.step_count % args.sample_every, args.steps - stepped)
+            start, cpu_start = time.perf_counter(), time.process_time()
+            sim.step(chunk)
+            if comm.size > 1:
+                comm.Barrier()
+            seconds += time.perf_counter() - start
+            cpu_seconds += time.process_time() - cpu_start
+            stepped += chunk
+            sample()
+        timers.unwrap()
+
+        rss_after = current_rss()
+        peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        system = sim.particle_system
+        state_bytes = array_bytes(system.state, system.neighbors, system.walls)
+        list_pairs = int(system.neighbors.pair_count)
+        builds = int(system.neighbors.builds)
+        final_positions = sim.particles.positions
+
+    # Reductions over ranks (ranks hold all particles today; RSS is per rank).
+    seconds = comm.allreduce(seconds, op=MPI.MAX)
+    cpu_share = comm.allreduce(cpu_seconds, op=MPI.SUM) / (seconds * ranks)
+    rss_delta = comm.allreduce(rss_after - rss_before, op=MPI.SUM)
+    state_bytes = comm.allreduce(state_bytes, op=MPI.SUM)
+    top = comm.allreduce(float(final_positions[:, 2].max()) if len(final_positions) else 0.0, op=MPI.MAX)
+    breakdown = {label: comm.allreduce(value, op=MPI.MAX) for label, value in timers.seconds.items()}
+    if "_compute_forces" in breakdown:
+        forces_total = breakdown.pop("_compute_forces")
+        breakdown["other force work (zeroing, reductions)"] = max(
+            0.0, forces_total - breakdown.get("pair contacts", 0.0) - breakdown.get("wall contacts", 0.0))
+    if breakdown:
+        breakdown["integration + Python per step"] = max(0.0, seconds - sum(breakdown.values()))
+    if rank != 0:
+        return {}
+
+    contacts = [s["contacts"] for s in samples if s["contacts"] is not None]
+    mean_contacts = float(np.mean(contacts)) if contacts else None
+    particle_steps = particles * args.steps
+    return {
+        "code": "pdemfem",
+        "particles": particles,
+        "steps": args.steps,
+        "untimed_steps_before": args.warmup + args.pre_steps,
+        "ranks": ranks,
+        "wall_seconds": seconds,
+        "cpu_share": cpu_share,
+        "particle_steps_per_second": particle_steps / seconds,
+        "particle_steps_per_second_per_core": particle_steps / seconds / ranks,
+        "mean_contacts": mean_contacts,
+        "contacts_include_walls": True,
+        "ns_per_contact": (1e9 * seconds * ranks / (args.steps * mean_contacts)) if mean_contacts else None,
+        "memory_rss_delta_bytes_per_particle": rss_delta / particles,
+        "memory_state_arrays_bytes_per_particle": state_bytes / particles,
+        "peak_rss_megabytes_rank0": peak_rss / 2**20,
+        "neighbour_list_pairs_at_end": list_pairs,
+        "neighbour_list_builds_total": builds,
+        "compile_or_cache_load_seconds": compile_seconds,
+        "build_seconds": build_seconds,
+        "bed_top_at_end_m": top,
+        "time_breakdown_seconds": breakdown,
+        "samples": samples,
+    }
+
+
+def pdemfem_under_mpi(args) -> dict:
+    """Run this script's pdemfem part on --ranks MPI processes and read its JSON back."""
+    with tempfile.TemporaryDirectory(prefix="settle-bench-mpi-") as scratch:
+        part = os.path.join(scratch, "pdemfem.json")
+        command = [sys.executable, "-m", "pdemfem.launch", "-n", str(args.ranks), "--",
+                   sys.executable, str(Path(__file__).resolve()), WORKER_FLAG, part,
+                   "--particles", str(args.particles), "--steps", str(args.steps),
+                   "--warmup", str(args.warmup), "--pre-steps", str(args.pre_steps),
+                   "--sample-every", str(args.sample_every)]
+        if not args.breakdown:
+            command.append("--no-breakdown")
+        subprocess.run(command, check=True, cwd=REPOSITORY)
+        with open(part) as handle:
+            return json.load(handle)
+
+
+# ----------------------------------------------------------------------------- LIGGGHTS
+LOOP_LINE = re.compile(r"Loop time of ([0-9.eE+-]+) on (\d+) procs for (\d+) steps with (\d+) atoms")
+MEMORY_LINE = re.compile(r"Memory usage per processor = ([0-9.eE+-]+) Mbytes")
+SECTION_LINE = re.compile(r"^(Pair|Neigh|Comm|Outpt|Other|Modify)\s+time \(%\) = ([0-9.eE+-]+)")
+
+
+def liggghts_variables(args) -> dict:
+    g = geometry(args.particles)
+    return {"steps": args.steps, "pre": args.warmup + args.pre_steps, "count": args.particles,
+            "nx": g["sites_per_side"], "ny": g["sites_per_side"], "lz": g["height"],
+            "thermo": args.sample_every, "seed": LIGGGHTS_SEED}
+
+
+def liggghts_command(args, executable: str = "liggghts") -> list:
+    from pdemfem.runtime import mpiexec_executable
+
+    command = [mpiexec_executable(), "-n", str(args.ranks), executable, "-echo", "none", "-log", "none",
+               "-in", str(DECK)]
+    for name, value in liggghts_variables(args).items():
+        command += ["-var", name, str(value)]
+    return command
+
+
+def parse_liggghts(output: str, ranks: int) -> dict:
+    loops = LOOP_LINE.findall(output)
+    if not loops:
+        raise RuntimeError("no 'Loop time' line in the LIGGGHTS output")
+    seconds, procs, steps, atoms = float(loops[-1][0]), int(loops[-1][1]), int(loops[-1][2]), int(loops[-1][3])
+    memory = MEMORY_LINE.findall(output)
+    # Thermo rows of the last run: the block after the last header, before the last Loop line.
+    lines = output.splitlines()
+    last_loop = max(i for i, line in enumerate(lines) if line.startswith("Loop time of"))
+    header = max(i for i in range(last_loop) if lines[i].split()[:1] == ["Step"])
+    names = lines[header].split()
+    samples = []
+    for line in lines[header + 1:last_loop]:
+        fields = line.split()
+        if len(fields) == len(names) and re.match(r"^-?\d", fields[0]):
+            row = dict(zip(names, (float(f) for f in fields)))
+            # LIGGGHTS prints thermo names without the v_/c_ prefix, cut to 8 characters.
+            samples.append({"step": int(row["Step"]), "contacts": int(round(row["contacts"])),
+                            "pair_contacts": int(round(row["paircont"])),
+                            "kinetic_energy": row.get("KinEng"), "rotational_energy": row.get("rke")})
+    sections = {}
+    tail = "\n".join(lines[last_loop:])
+    for line in tail.splitlines():
+        match = SECTION_LINE.match(line.strip())
+        if match:
+            sections[match.group(1)] = float(match.group(2))
+    contacts = [s["contacts"] for s in samples]
+    mean_contacts = sum(contacts) / len(contacts) if contacts else None
+    particle_steps = atoms * steps
+    return {
+        "code": "LIGGGHTS",
+        "particles": atoms,
+        "steps": steps,
+        "ranks": procs,
+        "wall_seconds": seconds,
+        "particle_steps_per_second": particle_steps / seconds,
+        "particle_steps_per_second_per_core": particle_steps / seconds / procs,
+        "mean_contacts": mean_contacts,
+        "contacts_include_walls": True,
+        "ns_per_contact": (1e9 * seconds * procs / (steps * mean_contacts)) if mean_contacts else None,
+        "memory_bytes_per_particle": float(memory[-1]) * 2**20 * procs / atoms if memory else None,
+        "memory_note": "LIGGGHTS' own estimate ('Memory usage per processor'), not RSS",
+        "time_breakdown_seconds": sections,
+        "samples": samples,
+    }
+
+
+def run_liggghts(args) -> dict:
+    executable = shutil.which("liggghts")
+    if executable is None:
+        return {}
+    from pdemfem.runtime import process_environment
+
+    command = liggghts_command(args, executable)
+    usage_before, wall_start = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="settle-liggghts-") as scratch:
+        completed = subprocess.run(command, cwd=scratch, env=process_environment(), capture_output=True, text=True)
+    usage_after, elapsed = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter() - wall_start
+    child_cpu = (usage_after.ru_utime - usage_before.ru_utime) + (usage_after.ru_stime - usage_before.ru_stime)
+    if completed.returncode != 0:
+        sys.stderr.write(completed.stdout[-3000:] + completed.stderr[-3000:])
+        raise RuntimeError(f"LIGGGHTS failed (exit {completed.returncode}): {' '.join(command)}")
+    result = parse_liggghts(completed.stdout, args.ranks)
+    result["command"] = " ".join(command)
+    # Whole process (setup, untimed and timed steps, mpiexec): LIGGGHTS has no CPU timer of its own.
+    result["cpu_share"] = child_cpu / (elapsed * args.ranks)
+    version = re.search(r"LIGGGHTS \(Version ([^,)]+)", completed.stdout)
+    result["version"] = version.group(1) if version else None
+    return result
+
+
+# ----------------------------------------------------------------------------- report
+def _fmt(value, digits=3):
+    if value is None:
+        return "-"
+    if isinstance(value, int):
+        return f"{value:,}"
+    if abs(value) >= 1e5:
+        return f"{value / 1e6:.{digits}f} M"
+    return f"{value:.{digits}g}"
+
+
+def print_table(results: dict) -> None:
+    pdem, lig = results.get("pdemfem") or {}, results.get("liggghts") or {}
+    rows = [
+        ("particles", "particles", None),
+        ("steps timed", "steps", None),
+        ("MPI ranks", "ranks", None),
+        ("wall time [s]", "wall_seconds", None),
+        ("CPU share (< 0.95: machine busy)", "cpu_share", None),
+        ("particle-steps/s per core", "particle_steps_per_second_per_core", "higher"),
+        ("mean contacts (pairs + walls)", "mean_contacts", None),
+        ("ns per contact (per core)", "ns_per_contact", "lower"),
+    ]
+    print()
+    print(f"{'settle benchmark':34s} {'pdemfem':>14s} {'LIGGGHTS':>14s} {'pdemfem/LIGGGHTS':>18s}")
+    for label, key, better in rows:
+        a, b = pdem.get(key), lig.get(key)
+        ratio = ""
+        if better and a and b:
+            ratio = f"{(a / b if better == 'higher' else b / a):.2f}x"
+        print(f"{label:34s} {_fmt(a):>14s} {_fmt(b):>14s} {ratio:>18s}")
+    mem_p = pdem.get("memory_rss_delta_bytes_per_particle")
+    mem_s = pdem.get("memory_state_arrays_bytes_per_particle")
+    mem_l = lig.get("memory_bytes_per_particle")
+    print(f"{'memory per particle [B] (RSS)':34s} {_fmt(mem_p):>14s} {'-':>14s}")
+    print(f"{'memory per particle [B] (arrays)':34s} {_fmt(mem_s):>14s} {_fmt(mem_l):>14s}")
+    if pdem.get("time_breakdown_seconds"):
+        print("\npdemfem: where the time goes (timed steps)")
+        total = pdem["wall_seconds"]
+        for label, value in pdem["time_breakdown_seconds"].items():
+            print(f"  {label:44s} {value:8.3f} s  {100 * value / total:5.1f} %")
+    if lig.get("time_breakdown_seconds"):
+        print("LIGGGHTS: where the time goes (its own timers; walls are in 'Other' or 'Modify')")
+        total = lig["wall_seconds"]
+        for label, value in lig["time_breakdown_seconds"].items():
+            print(f"  {label:44s} {value:8.3f} s  {100 * value / total:5.1f} %")
+    if pdem and lig and pdem.get("particle_steps_per_second_per_core") and lig.get("particle_steps_per_second_per_core"):
+        ratio = pdem["particle_steps_per_second_per_core"] / lig["particle_steps_per_second_per_core"]
+        print(f"\npdemfem / LIGGGHTS particle-steps/s per core: {ratio:.2f} (target >= 1.5)")
+    if not lig:
+        print("\nLIGGGHTS: not run (`liggghts` not on PATH, or --no-liggghts)")
+
+
+# ----------------------------------------------------------------------------- main
+def parse_arguments(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=10000,
+                        help="timed steps (default 10000 = 0.2 s: the whole settling; 2000 is mostly free fall)")
+    parser.add_argument("--particles", type=int, default=REFERENCE_PARTICLES,
+                        help="particle count; the box footprint scales to keep the packing (default 28000)")
+    parser.add_argument("--ranks", type=int, default=1, help="MPI ranks for both codes (default 1)")
+    parser.add_argument("--warmup", type=int, default=5, help="untimed steps after building (default 5)")
+    parser.add_argument("--pre-steps", type=int, default=0,
+                        help="further untimed steps before timing, e.g. 8000 to time the settled bed (default 0)")
+    parser.add_argument("--sample-every", type=int, default=500,
+                        help="steps between contact-count samples (default 500)")
+    parser.add_argument("--json", type=Path, default=DEFAULT_JSON, help=f"result file (default {DEFAULT_JSON})")
+    parser.add_argument("--no-liggghts", action="store_true", help="skip LIGGGHTS even when installed")
+    parser.add_argument("--no-pdemfem", action="store_true", help="run LIGGGHTS only")
+    parser.add_argument("--no-breakdown", dest="breakdown", action="store_false",
+                        help="do not time pdemfem's phases (pair, wall, rebuild)")
+    parser.add_argument(WORKER_FLAG, dest="worker_json", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.steps <= 0 or args.particles <= 0 or args.ranks <= 0 or args.sample_every <= 0:
+        parser.error("--steps, --particles, --ranks and --sample-every must be positive")
+    return args
+
+
+def main(argv=None) -> int:
+    args = parse_arguments(argv)
+    sys.path.insert(0, str(REPOSITORY))
+    import pdemfem  # noqa: F401  (sets the process environment before mpi4py loads)
+
+    if args.worker_json:  # one rank of `--ranks R`, started by pdemfem_under_mpi
+        result = run_pdemfem(args)
+        if result:
+            with open(args.worker_json, "w") as handle:
+                json.dump(result, handle)
+        return 0
+
+    results = {
+        "benchmark": "settle",
+        "scene": {"particles": args.particles, "diameter": DIAMETER, "density": DENSITY,
+                  "youngs_modulus": YOUNGS_MODULUS, "poisson_ratio": POISSON_RATIO, "restitution": RESTITUTION,
+                  "friction": FRICTION, "dt": DT, "lattice_spacing": SPACING, "jitter": JITTER, "skin": SKIN,
+                  **geometry(args.particles)},
+        "machine": {"platform": platform.platform(), "python": platform.python_version(),
+                    "processor": _processor_name(), "cpus_available": len(os.sched_getaffinity(0)),
+                    # Other work on the machine skews timings: compare against cpus_available.
+                    "load_average_1min_at_start": os.getloadavg()[0]},
+        "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+    }
+    if not args.no_pdemfem:
+        print(f"pdemfem: {args.particles} particles, {args.warmup + args.pre_steps} untimed + {args.steps} "
+              f"timed steps on {args.ranks} rank(s) ...", flush=True)
+        results["pdemfem"] = run_pdemfem(args) if args.ranks == 1 else pdemfem_under_mpi(args)
+    if not args.no_liggghts and shutil.which("liggghts"):
+        print(f"LIGGGHTS: {' '.join(liggghts_command(args))}", flush=True)
+        results["liggghts"] = run_liggghts(args)
+    pdem, lig = results.get("pdemfem") or {}, results.get("liggghts") or {}
+    if pdem and lig:
+        results["ratio_pdemfem_over_liggghts"] = {
+            "particle_steps_per_second_per_core":
+                pdem["particle_steps_per_second_per_core"] / lig["particle_steps_per_second_per_core"],
+            "ns_per_contact": (pdem["ns_per_contact"] / lig["ns_per_contact"]
+                               if pdem.get("ns_per_contact") and lig.get("ns_per_contact") else None),
+        }
+    print_table(results)
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    with open(args.json, "w") as handle:
+        json.dump(results, handle, indent=2)
+    print(f"\nresults: {args.json}")
+    return 0
+
+
+def _processor_name() -> str:
+    try:
+        with open("/proc/cpuinfo") as handle:
+            for line in handle:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
