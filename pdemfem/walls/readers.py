@@ -49,17 +49,22 @@ def read_surface(path, scale: float = 1.0):
 
 
 def clean_surface(vertices, triangles):
-    """Weld identical vertices (STL stores every corner separately), drop degenerate triangles and unused vertices."""
+    """Weld coincident vertices (STL stores every corner separately), drop degenerate triangles and unused vertices."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
-    unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    # Weld vertices closer than 1e-10 of the mesh size (snapped keys; the first copy's coordinates are kept).
+    size = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 1.0
+    quantum = max(size, 1e-300) * 1e-10
+    keys = np.round(vertices / quantum).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    unique = vertices[first]
     triangles = inverse.reshape(-1)[triangles]
     distinct = ((triangles[:, 0] != triangles[:, 1]) & (triangles[:, 1] != triangles[:, 2])
                 & (triangles[:, 2] != triangles[:, 0]))
     triangles = triangles[distinct]
     a, b, c = (unique[triangles[:, k]] for k in range(3))
     area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    size = max(float(np.ptp(unique, axis=0).max()) if len(unique) else 1.0, 1e-300)
+    size = max(size, 1e-300)
     triangles = triangles[area2 > 1e-14 * size * size]
     used = np.unique(triangles)
     renumber = np.full(len(unique), -1, dtype=np.int64)

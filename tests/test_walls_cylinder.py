@@ -1,0 +1,81 @@
+"""Analytic cylinder walls: overlap, normal and force against the radial geometry."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pdemfem.simulation import Simulation
+
+RADIUS = 0.005
+E_STAR = 1.0 / ((1 - 0.25**2) / 1.0e8 + (1 - 0.3**2) / 2.0e11)
+AXIS_POINT = np.array([0.1, -0.2, 0.3])
+AXIS = np.array([1.0, 2.0, 2.0]) / 3.0
+
+
+def build(tmp_path, inside, position, velocity=(0, 0, 0), angular_velocity=(0, 0, 0), gravity=(0, 0, 0)):
+    wall = {"name": "drum", "kind": "cylinder", "material": "steel", "radius": 0.1, "inside": inside,
+            "axis": {"point": AXIS_POINT.tolist(), "direction": (3 * AXIS).tolist()},
+            "angular_velocity": list(angular_velocity)}
+    data = {
+        "time": {"end": 1.0, "dt": 1e-6},
+        "gravity": list(gravity),
+        "materials": {"glass": {"density": 2500.0, "youngs_modulus": 1.0e8, "poisson_ratio": 0.25},
+                      "steel": {"density": 7800.0, "youngs_modulus": 2.0e11, "poisson_ratio": 0.3}},
+        "particles": [{"name": "p", "material": "glass", "radius": RADIUS,
+                       "insert": {"kind": "list", "positions": [list(map(float, position))],
+                                  "velocities": [list(velocity)]}}],
+        "walls": [wall],
+    }
+    return Simulation.from_dict(data, base_dir=tmp_path, output_dir=tmp_path / "out")
+
+
+def radial_unit():
+    # A unit vector normal to the axis.
+    radial = np.cross(AXIS, [0.0, 0.0, 1.0])
+    return radial / np.linalg.norm(radial)
+
+
+@pytest.mark.parametrize("inside", [True, False])
+def test_overlap_and_force_match_radial_geometry(tmp_path, inside):
+    radial = radial_unit()
+    overlap = 3.0e-5
+    distance = 0.1 - RADIUS + overlap if inside else 0.1 + RADIUS - overlap
+    position = AXIS_POINT + 0.37 * AXIS + distance * radial
+    sim = build(tmp_path, inside, position)
+    force = sim.particle_system.state.forces[0]
+    # At rest only the Hertz spring acts: F = 4/3 E* sqrt(r) delta^1.5 (R* = r, the wall convention),
+    # pointing to the axis inside and away from it outside.  rtol 1e-9: the overlap is a difference of
+    # 0.1 m-sized distances (round-off ~1e-17 m in 3e-5 m) -- far below any geometric mistake.
+    magnitude = 4.0 / 3.0 * E_STAR * math.sqrt(RADIUS) * overlap**1.5
+    expected = magnitude * (-radial if inside else radial)
+    np.testing.assert_allclose(force, expected, rtol=1e-9, atol=1e-9 * magnitude)
+    np.testing.assert_allclose(sim.wall_force("drum"), -expected, rtol=1e-9, atol=1e-9 * magnitude)
+    assert sim.contact_count() == 1
+    # Torque on the wall about the axis point: the contact point lies on the mantle, the force is radial.
+    contact = AXIS_POINT + 0.37 * AXIS + 0.1 * radial
+    np.testing.assert_allclose(sim.wall_torque("drum", about=AXIS_POINT), np.cross(contact - AXIS_POINT, -expected),
+                               atol=1e-12 * magnitude)
+
+
+@pytest.mark.parametrize("inside", [True, False])
+def test_no_contact_when_clear(tmp_path, inside):
+    radial = radial_unit()
+    distance = 0.1 - RADIUS - 1e-6 if inside else 0.1 + RADIUS + 1e-6
+    sim = build(tmp_path, inside, AXIS_POINT + distance * radial)
+    assert sim.contact_count() == 0 and not np.any(sim.particle_system.state.forces)
+
+
+def test_rotating_drum_drags_particle_along_its_surface(tmp_path):
+    radial = radial_unit()
+    position = AXIS_POINT + (0.1 - RADIUS + 1e-5) * radial
+    omega = 3.0 * AXIS
+    sim = build(tmp_path, True, position, angular_velocity=omega)
+    sim.step(50)
+    velocity = sim.particle_system.state.velocities[0]
+    surface_direction = np.cross(AXIS, radial)  # w x r at the contact point
+    assert velocity @ surface_direction > 0
+    # The tangential drag is along the surface motion (the normal part is the Hertz push inward).
+    tangential = velocity - (velocity @ radial) * radial
+    assert abs(tangential @ AXIS) < 1e-9 * np.linalg.norm(tangential)
