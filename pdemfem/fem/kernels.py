@@ -240,10 +240,11 @@ def cell_stresses(coords, cells, n_cells, displacement, delta_t, centroid_grads,
 
 
 @njit(cache=True)
-def central_difference_update(u, v, acceleration, internal, load, inverse_mass, constrained, prescribed_velocity, dt, decay, gain, lumped):
+def central_difference_update(u, v, acceleration, internal, base_load, nodal_load, load, inverse_mass, constrained,
+                              prescribed_velocity, dt, decay, gain, lumped, clear_nodal):
     """One explicit step on owned dofs (flat arrays); returns this rank's external work increment.
 
-    M a = load - internal at free dofs (a = (load - internal) * inverse_mass when lumped, else
+    load = base_load + nodal_load (nodal_load then cleared when asked); M a = load - internal at free dofs (a = (load - internal) * inverse_mass when lumped, else
     `acceleration` holds the solve's result); v+ = decay * v + gain * dt * a; constrained dofs take
     their prescribed velocity; u += dt * v+.  Work uses the midpoint displacement increment
     dt (v- + v+)/2 with the applied load at free dofs and the support force (= internal, a = 0) at
@@ -251,17 +252,21 @@ def central_difference_update(u, v, acceleration, internal, load, inverse_mass, 
     """
     work = 0.0
     for i in range(u.shape[0]):
+        f = base_load[i] + nodal_load[i]
+        load[i] = f  # kept for reactions
+        if clear_nodal:
+            nodal_load[i] = 0.0
         if constrained[i]:
             a = 0.0
             v_new = prescribed_velocity[i]
             force = internal[i]
         else:
             if lumped:
-                a = (load[i] - internal[i]) * inverse_mass[i]
+                a = (f - internal[i]) * inverse_mass[i]
             else:
                 a = acceleration[i]
             v_new = decay * v[i] + gain * dt * a
-            force = load[i]
+            force = f
         acceleration[i] = a
         work += force * 0.5 * dt * (v[i] + v_new)
         v[i] = v_new

@@ -88,6 +88,7 @@ class Solid:
         self.constant_load_vec = self.stiffness.createVecRight()  # gravity + tractions + point forces
         self.thermal_load_vec = self.stiffness.createVecRight()
         self.nodal_force_vec = self.stiffness.createVecRight()  # external (contact) forces for the next step
+        self._base_load_vec = self.stiffness.createVecRight()  # constant + thermal
         self._work_vec = self.stiffness.createVecRight()
         self.coordinates_vec = self.stiffness.createVecRight()
         self.coordinates_vec.setArray(mesh.points[: self.n_owned_nodes].ravel())
@@ -145,6 +146,7 @@ class Solid:
             forces = np.array([p.force for p in self.config.point_forces], dtype=float)
             self.constant_load_vec.setValuesBlocked(mesh.point_nodes.astype(PETSc.IntType), forces.ravel(), PETSc.InsertMode.ADD_VALUES)
         self.constant_load_vec.assemble()
+        self._update_base_load()
         self.gravity = tuple(float(g) for g in gravity)
 
     def set_temperature(self, nodal_temperatures) -> None:
@@ -161,6 +163,7 @@ class Solid:
                 self._thermal_energy_coefficient, load,
             )
         self.thermal_load_vec.setArray(load.ravel())
+        self._update_base_load()
         self._thermal_energy = _sum(self.comm, energy)
 
     def add_nodal_forces(self, global_node_indices, forces) -> None:
@@ -173,8 +176,10 @@ class Solid:
     def _gather_loads(self) -> None:
         """Collective: load = constant + thermal + the nodal forces added since the last step (routed to owners)."""
         self.nodal_force_vec.assemble()
-        self.load_vec.waxpy(1.0, self.constant_load_vec, self.thermal_load_vec)
-        self.load_vec.axpy(1.0, self.nodal_force_vec)
+        self.load_vec.waxpy(1.0, self._base_load_vec, self.nodal_force_vec)
+
+    def _update_base_load(self) -> None:
+        self._base_load_vec.waxpy(1.0, self.constant_load_vec, self.thermal_load_vec)
 
     # ------------------------------------------------------------ constraints
     def prescribe_owned_nodes(self, owned_nodes, displacement=None, velocity=None) -> None:
@@ -263,9 +268,8 @@ class Solid:
         """
         if check_stability:
             self._check_step(dt)
-        self._gather_loads()
-        self._advance(dt)
-        self.nodal_force_vec.zeroEntries()
+        self.nodal_force_vec.assemble()  # collective: routes every rank's additions to the owners
+        self._advance(dt, clear_nodal=True)
 
     def advance(self, interval: float) -> int:
         """Collective: cover `interval` with the fewest equal stable steps (sub-cycling); returns their number.
@@ -274,10 +278,9 @@ class Solid:
         """
         substeps = max(1, math.ceil(interval / self.critical_time_step() * (1.0 - 1e-12)))
         dt = interval / substeps
-        self._gather_loads()
-        for _ in range(substeps):
-            self._advance(dt)
-        self.nodal_force_vec.zeroEntries()
+        self.nodal_force_vec.assemble()
+        for substep in range(substeps):
+            self._advance(dt, clear_nodal=substep == substeps - 1)
         return substeps
 
     def _check_step(self, dt: float) -> None:
@@ -292,26 +295,25 @@ class Solid:
                 fix="lower time.dt, refine less, or let the coupling sub-cycle the solid (Solid.advance)",
             )
 
-    def _advance(self, dt: float) -> None:
+    def _advance(self, dt: float, clear_nodal: bool) -> None:
         if self.damping_beta != 0.0:
             self._work_vec.waxpy(self.damping_beta, self.velocity_vec, self.displacement_vec)
             self.stiffness.mult(self._work_vec, self.internal_force_vec)
         else:
             self.stiffness.mult(self.displacement_vec, self.internal_force_vec)
         if not self.lumped:
+            self.load_vec.waxpy(1.0, self._base_load_vec, self.nodal_force_vec)
             self._solve_consistent_mass()
         half_alpha = 0.5 * self.damping_alpha * dt
         decay, gain = (1.0 - half_alpha) / (1.0 + half_alpha), 1.0 / (1.0 + half_alpha)
-        u = self.displacement_vec.getArray()
-        v = self.velocity_vec.getArray()
-        a = self.acceleration_vec.getArray()
+        # getArray() views: petsc4py restores (and bumps the state of) each Vec before the kernel writes
+        # in place, and nothing reads a cached norm in between, so no copies are needed.
         work = kernels.central_difference_update(
-            u, v, a, self.internal_force_vec.getArray(readonly=True), self.load_vec.getArray(readonly=True),
-            self._inverse_lumped_mass, self._constrained, self._prescribed_velocity, dt, decay, gain, self.lumped,
+            self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
+            self.internal_force_vec.getArray(readonly=True), self._base_load_vec.getArray(readonly=True),
+            self.nodal_force_vec.getArray(), self.load_vec.getArray(), self._inverse_lumped_mass, self._constrained,
+            self._prescribed_velocity, dt, decay, gain, self.lumped, clear_nodal,
         )
-        self.displacement_vec.setArray(u)
-        self.velocity_vec.setArray(v)
-        self.acceleration_vec.setArray(a)
         self.external_work += _sum(self.comm, work)
         self.time += dt
         self.step_count += 1

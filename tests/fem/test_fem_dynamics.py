@@ -178,3 +178,29 @@ def test_rayleigh_damping_dissipates_and_lowers_the_critical_step():
     for _ in range(500):
         damped.step(damped.critical_time_step())
     assert damped.kinetic_energy() + damped.strain_energy() < 0.5 * energy0
+
+
+def test_nodal_forces_deliver_their_impulse_and_work():
+    # a free block: one step with nodal forces F changes the momentum by sum(F) dt exactly (lumped mass)
+    solid = box_solid((0, 0, 0), (0.2, 0.1, 0.1), (2, 1, 1), material(E=2e11, nu=0.3, rho=7800.0), contact=["zmax"])
+    nodes, _, _ = solid.surface_state()
+    forces = np.tile([1.0, -2.0, 3.0], (len(nodes), 1))
+    dt = solid.critical_time_step()
+    solid.add_nodal_forces(nodes, forces)
+    solid.add_nodal_forces(nodes[:1], [[0.5, 0.0, 0.0]])  # adds up with the first call
+    solid.step(dt)
+    mass = solid.lumped_mass.getArray().reshape(-1, 3)
+    momentum = (mass * solid.velocities).sum(axis=0)
+    impulse = (forces.sum(axis=0) + [0.5, 0.0, 0.0]) * dt
+    assert np.allclose(momentum, impulse, rtol=1e-12, atol=0)  # round-off of a sum of ~30 terms
+    # work of the step: F . (u1 - u0) / 2 (midpoint rule with v_{-1/2} = 0)
+    moved = solid.displacements
+    expected_work = 0.5 * (np.sum(forces * moved[nodes]) + 0.5 * moved[nodes[0], 0])
+    assert solid.external_work == pytest.approx(expected_work, rel=1e-12)
+    solid.step(dt)  # the forces were cleared after the step
+    assert np.allclose((mass * solid.velocities).sum(axis=0), impulse, rtol=1e-12, atol=0)
+    # sub-cycled: the same forces act over the whole interval
+    solid.add_nodal_forces(nodes, forces)
+    substeps = solid.advance(2.5 * dt)
+    assert substeps == 3
+    assert np.allclose((mass * solid.velocities).sum(axis=0), impulse + forces.sum(axis=0) * 2.5 * dt, rtol=1e-12, atol=0)
