@@ -335,3 +335,27 @@ def test_readers_stl_and_gmsh(tmp_path):
     _, counts = np.unique(edges, axis=0, return_counts=True)
     assert np.all(counts == 2)
     assert smooth_patches(points, tris).max() + 1 == 6
+
+
+def test_scene_keys_and_tunnelling_warning(tmp_path):
+    from pdemfem.errors import SceneError
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import load_scene
+
+    points, triangles = grid(2, 0.1)
+    name = write_mesh(tmp_path / "plate.msh", points, triangles)
+    plate = {"name": "plate", "kind": "mesh", "material": "steel", "file": name}
+    fast = scene(plate, positions=[[0, 0, 0.05]], velocities=[[0, 0, -40.0]], dt=2.0e-5)
+    loaded, _ = load_scene(fast, base_dir=tmp_path)
+    # 40 m/s x 2e-5 s = 0.8 mm = 0.16 radius per step: over the general 0.1 limit, under the mesh's 0.5.
+    assert not any("tunnel" in warning for warning in derived.warnings(loaded))
+    fast["particles"][0]["insert"]["velocities"] = [[0, 0, -150.0]]  # 3 mm per step = 0.6 radius
+    loaded, _ = load_scene(fast, base_dir=tmp_path)
+    assert any("mesh wall 'plate'" in warning and "tunnel" in warning for warning in derived.warnings(loaded))
+    # Keys of another kind are errors naming the kind's keys; a cylinder needs radius and axis.
+    with pytest.raises(SceneError, match="kind mesh does not use normal"):
+        load_scene(scene(dict(plate, normal=[0, 0, 1]), positions=[[0, 0, 0.05]], velocities=[[0, 0, 0]]),
+                   base_dir=tmp_path)
+    with pytest.raises(SceneError, match="kind cylinder needs radius"):
+        load_scene(scene({"name": "c", "kind": "cylinder", "material": "steel", "axis": {"direction": [0, 0, 1]}},
+                         positions=[[0, 0, 0.05]], velocities=[[0, 0, 0]]), base_dir=tmp_path)
