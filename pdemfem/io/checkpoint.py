@@ -135,7 +135,7 @@ def sort_rows_by_key(comm, keys, arrays: dict) -> tuple[np.ndarray, dict]:
     keys = _as_key(keys)
     order = _lex_order(keys)
     keys = keys[order]
-    arrays = {name: np.ascontiguousarray(np.asarray(values)[order]) for name, values in arrays.items()}
+    arrays = {name: np.take(np.asarray(values), order, axis=0) for name, values in arrays.items()}
     size = comm.size
     if size == 1:
         return keys, arrays
@@ -161,7 +161,7 @@ def sort_rows_by_key(comm, keys, arrays: dict) -> tuple[np.ndarray, dict]:
     keys = _exchange_rows(comm, keys, send_counts, recv_counts)
     arrays = {name: _exchange_rows(comm, values, send_counts, recv_counts) for name, values in arrays.items()}
     order = _lex_order(keys)
-    return keys[order], {name: values[order] for name, values in arrays.items()}
+    return keys[order], {name: np.take(values, order, axis=0) for name, values in arrays.items()}
 
 
 # ---------------------------------------------------------------- checksums
