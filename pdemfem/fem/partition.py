@@ -165,6 +165,10 @@ def build_partition(mesh: GlobalMesh, element: str, n_parts: int, group_names, c
     return payloads
 
 
+def mesh_description(exc: Exception) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
 def distribute_mesh(comm, load_global_mesh, element: str, group_names, contact_names, points_of_interest=()) -> LocalMesh:
     """Collective: rank 0 calls load_global_mesh() and partitions; every rank gets its LocalMesh.
 
@@ -176,9 +180,13 @@ def distribute_mesh(comm, load_global_mesh, element: str, group_names, contact_n
             payloads = build_partition(load_global_mesh(), element, comm.size, group_names, contact_names, points_of_interest)
         except PdemfemError as exc:
             error = (type(exc).__name__, exc.where, exc.problem, exc.fix)
+        except Exception as exc:  # a bug must not leave the other ranks waiting in bcast
+            error = ("RuntimeError", mesh_description(exc), "", "")
     error = comm.bcast(error, root=0)
     if error is not None:
         import pdemfem.errors as errors
 
+        if error[0] == "RuntimeError":
+            raise RuntimeError(f"mesh setup failed on rank 0: {error[1]}")
         raise getattr(errors, error[0])(where=error[1], problem=error[2], fix=error[3])
     return LocalMesh(**comm.scatter(payloads, root=0))

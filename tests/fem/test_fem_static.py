@@ -1,7 +1,6 @@
 """Static verification: patch test, cantilever convergence and P1 locking, reactions, thermal bars."""
 import numpy as np
 import pytest
-from mpi4py import MPI
 
 from fem_helpers import box_solid, direct_solver, material, unstructured_box_msh
 from pdemfem.errors import SolverError
