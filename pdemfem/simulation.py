@@ -61,26 +61,33 @@ class Simulation:
                                   dtype=np.int32)
         group_density = np.array([scene.materials[group.material].density for group in scene.particles])
         group_temperature = np.array([group.initial_temperature or 0.0 for group in scene.particles])
-        count = len(inserted.radii)
+        total = len(inserted.radii)
+        # Every rank places all particles identically (ids = insertion order) and keeps an
+        # even slice; the first list build then moves each particle to the rank owning its box.
+        mine = slice(total * self.comm.rank // self.comm.size, total * (self.comm.rank + 1) // self.comm.size)
+        groups = inserted.group_index[mine]
         plane_walls = [wall for wall in scene.walls if wall.kind == "plane"]
         state = ParticleState(
-            ids=np.arange(count, dtype=np.int64),
-            material_index=group_material[inserted.group_index] if count else np.zeros(0, np.int32),
-            radii=inserted.radii,
-            densities=group_density[inserted.group_index] if count else np.zeros(0),
-            positions=inserted.positions,
-            velocities=inserted.velocities,
-            angular_velocities=inserted.angular_velocities,
-            temperatures=group_temperature[inserted.group_index] if count else np.zeros(0),
+            ids=np.arange(total, dtype=np.int64)[mine],
+            material_index=group_material[groups] if total else np.zeros(0, np.int32),
+            radii=inserted.radii[mine],
+            densities=group_density[groups] if total else np.zeros(0),
+            positions=inserted.positions[mine],
+            velocities=inserted.velocities[mine],
+            angular_velocities=inserted.angular_velocities[mine],
+            temperatures=group_temperature[groups] if total else np.zeros(0),
             wall_count=len(plane_walls),
         )
+        count = total
         walls = PlaneWalls(plane_walls, tables.material_names)
         # Mesh and cylinder walls plug into the particle system as contributors.
         self.contributor_walls = build_contributor_walls(scene, self.base_dir, tables.material_names)
         smallest_radius = float(inserted.radii.min()) if count else 1.0
         skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
         return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm,
-                              contributors=self.contributor_walls)
+                              contributors=self.contributor_walls,
+                              domain_box=scene.domain.box, periodic_axes=scene.domain.periodic,
+                              rebalance_threshold=scene.parallel.rebalance_threshold)
 
     # ------------------------------------------------------------ stepping
     def step(self, count: int = 1) -> None:
@@ -122,7 +129,7 @@ class Simulation:
             self.output_dir.mkdir(parents=True, exist_ok=True)
         self.comm.Barrier()
         columns = ["time", "step", "particles", "kinetic_energy", "rotational_energy", "potential_energy",
-                   "elastic_energy", "dissipated_energy", "wall_work", "contacts"]
+                   "elastic_energy", "dissipated_energy", "wall_work", "contacts", "lost_particles"]
         for name in (wall.name for wall in self.scene.walls):
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
         self._history = HistoryWriter(self.output_dir / "history.csv", columns, self.comm.rank == 0,
@@ -136,6 +143,7 @@ class Simulation:
     def history_row(self) -> dict:
         system = self.particle_system
         row = {"time": self.time, "step": self.step_count, "particles": self.particle_count(),
+               "lost_particles": system.lost_particles,
                "contacts": system.contact_count}
         row.update(self.energies())
         for wall in self.scene.walls:
@@ -166,7 +174,7 @@ class Simulation:
 
     def particle_count(self) -> int:
         """Total number of particles over all ranks."""
-        return self.particle_system.state.count
+        return self.particle_system.global_count()
 
     def wall_force(self, name: str) -> np.ndarray:
         """Total contact force the particles exert on a wall (summed over ranks)."""

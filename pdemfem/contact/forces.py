@@ -162,26 +162,35 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
 
 
 @njit(cache=True)
-def pair_forces(first_row, last_row, neighbor_offsets, neighbor_partners, pair_history,
+def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history, ids, owned_count,
                 positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
                 effective_modulus, effective_shear_modulus, damping, friction, rolling_friction, model_code,
                 normal_stiffness, tangential_ratio, characteristic_speed, dt, rolling_enabled,
                 forces, torques):
-    """Add the forces of all sphere-sphere contacts of rows [first_row, last_row) of the half list.
+    """Add the forces of all sphere-sphere contacts of the half list (row r is particle row_particles[r]).
 
+    A pair with a ghost is computed on both ranks that own one of its particles
+    (each keeps the force on its own particle); its energy and count are booked
+    only on the rank owning the lower id, so sums over ranks count it once.
     Returns (elastic energy, dissipated energy of this step, number of contacts).
     """
     elastic_total = 0.0
     dissipated_total = 0.0
     contacts = 0
-    for i in range(first_row, last_row):
+    for r in range(row_particles.shape[0]):
+        i = row_particles[r]
+        i_owned = i < owned_count
         xi = positions[i, 0]
         yi = positions[i, 1]
         zi = positions[i, 2]
         radius_i = radii[i]
         material_i = material_index[i]
-        for row in range(neighbor_offsets[i], neighbor_offsets[i + 1]):
+        for row in range(neighbor_offsets[r], neighbor_offsets[r + 1]):
             j = neighbor_partners[row]
+            if i_owned:
+                booked = j < owned_count or ids[i] < ids[j]
+            else:
+                booked = ids[j] < ids[i]
             dx = xi - positions[j, 0]
             dy = yi - positions[j, 1]
             dz = zi - positions[j, 2]
@@ -189,7 +198,7 @@ def pair_forces(first_row, last_row, neighbor_offsets, neighbor_partners, pair_h
             radius_sum = radius_i + radii[j]
             if distance_squared >= radius_sum * radius_sum:
                 xi_squared = pair_history[row, 0] ** 2 + pair_history[row, 1] ** 2 + pair_history[row, 2] ** 2
-                if xi_squared > 0.0:
+                if xi_squared > 0.0 and booked:
                     # The contact opened this step: its spring energy (booked as elastic) is lost.
                     ex = dx - dt * (velocities[i, 0] - velocities[j, 0])
                     ey = dy - dt * (velocities[i, 1] - velocities[j, 1])
@@ -237,9 +246,10 @@ def pair_forces(first_row, last_row, neighbor_offsets, neighbor_partners, pair_h
                 rolling_friction[material_i, material_j], model_code[material_i, material_j],
                 normal_stiffness[material_i, material_j], tangential_ratio[material_i, material_j],
                 characteristic_speed, effective_inertia, pair_history, row, dt, rolling_enabled)
-            elastic_total += elastic
-            dissipated_total += dissipated
-            contacts += 1
+            if booked:
+                elastic_total += elastic
+                dissipated_total += dissipated
+                contacts += 1
             forces[i, 0] += fx
             forces[i, 1] += fy
             forces[i, 2] += fz

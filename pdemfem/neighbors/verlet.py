@@ -1,11 +1,16 @@
-"""Half Verlet list in CSR form over cell-sorted particles, with history carry-over.
+"""Half Verlet list in CSR form over owned particles and ghosts, with history carry-over.
 
-Each pair within `skin` of touching is listed once (a half stencil of 13
-neighbouring cells plus the own cell); the list stays valid until some
-particle has moved more than skin/2 (checked in the drift kernel).  Tangential
-history lives aligned with the list and is carried across a rebuild through
-the sort permutation: the new pair (k, l) looks up the old pair of the same two
-particles, flipping the sign when the old pair was stored the other way round.
+Each pair within `skin` of touching that involves at least one owned particle is
+listed once (a half stencil of 13 neighbouring cells plus the own cell).  Rows
+follow the cell order (`row_particles[r]` is the particle of row r), so the
+force loop walks memory in space-filling order.  The list stays valid until
+some particle has moved more than skin/2 (checked in the drift kernel).
+
+Tangential history lives aligned with the list.  Across a rebuild (and a
+migration between ranks) it travels as *contact records* (owner id, partner
+id, xi oriented for the owner), one per owned particle in a contact, and is
+looked up again by the two global ids, so no history is lost to a re-sort,
+a migration or a change of rank count.
 """
 from __future__ import annotations
 
@@ -20,18 +25,22 @@ _FORWARD_OFFSETS = np.array(
      if dz > 0 or (dz == 0 and dy > 0) or (dz == 0 and dy == 0 and dx > 0)],
     dtype=np.int64,
 )
+RECORD_WIDTH = 5  # owner id, partner id, xi (3)
 
 
 @njit(cache=True)
-def _fill_pairs(positions, radii, skin, cell_of, starts, dimensions, forward_offsets, offsets, partners):
-    """Write partners row by row; returns the number of pairs (may exceed the capacity)."""
-    count = positions.shape[0]
+def _fill_pairs(positions, radii, skin, owned_count, order, sorted_cells, starts, dimensions, forward_offsets,
+                offsets, partners):
+    """Write partners row by row (row p = particle order[p]); returns the pair count (may exceed capacity)."""
+    count = order.shape[0]
     capacity = partners.shape[0]
     nx, ny, nz = dimensions[0], dimensions[1], dimensions[2]
     written = 0
-    for i in range(count):
-        offsets[i] = written
-        cell = cell_of[i]
+    for p in range(count):
+        offsets[p] = written
+        i = order[p]
+        i_is_ghost = i >= owned_count
+        cell = sorted_cells[p]
         cx = cell % nx
         cy = (cell // nx) % ny
         cz = cell // (nx * ny)
@@ -39,24 +48,24 @@ def _fill_pairs(positions, radii, skin, cell_of, starts, dimensions, forward_off
         yi = positions[i, 1]
         zi = positions[i, 2]
         reach = radii[i] + skin
-        # Own cell: later particles only.
-        for j in range(i + 1, starts[cell + 1]):
-            dx = xi - positions[j, 0]
-            dy = yi - positions[j, 1]
-            dz = zi - positions[j, 2]
-            cutoff = reach + radii[j]
-            if dx * dx + dy * dy + dz * dz < cutoff * cutoff:
-                if written < capacity:
-                    partners[written] = j
-                written += 1
-        for k in range(forward_offsets.shape[0]):
-            x = cx + forward_offsets[k, 0]
-            y = cy + forward_offsets[k, 1]
-            z = cz + forward_offsets[k, 2]
-            if x < 0 or y < 0 or z < 0 or x >= nx or y >= ny or z >= nz:
-                continue
-            neighbour_cell = x + nx * (y + ny * z)
-            for j in range(starts[neighbour_cell], starts[neighbour_cell + 1]):
+        for k in range(forward_offsets.shape[0] + 1):
+            if k == 0:
+                # Own cell: later rows only.
+                first = p + 1
+                last = starts[cell + 1]
+            else:
+                x = cx + forward_offsets[k - 1, 0]
+                y = cy + forward_offsets[k - 1, 1]
+                z = cz + forward_offsets[k - 1, 2]
+                if x < 0 or y < 0 or z < 0 or x >= nx or y >= ny or z >= nz:
+                    continue
+                neighbour_cell = x + nx * (y + ny * z)
+                first = starts[neighbour_cell]
+                last = starts[neighbour_cell + 1]
+            for q in range(first, last):
+                j = order[q]
+                if i_is_ghost and j >= owned_count:
+                    continue
                 dx = xi - positions[j, 0]
                 dy = yi - positions[j, 1]
                 dz = zi - positions[j, 2]
@@ -69,33 +78,11 @@ def _fill_pairs(positions, radii, skin, cell_of, starts, dimensions, forward_off
     return written
 
 
-@njit(cache=True)
-def _carry_history(new_offsets, new_partners, new_history, old_offsets, old_partners, old_history, old_index):
-    """Copy each surviving pair's tangential spring into the new list (old_index: new -> old)."""
-    for k in range(new_offsets.shape[0] - 1):
-        a = old_index[k]
-        for row in range(new_offsets[k], new_offsets[k + 1]):
-            b = old_index[new_partners[row]]
-            found = False
-            for old_row in range(old_offsets[a], old_offsets[a + 1]):
-                if old_partners[old_row] == b:
-                    for axis in range(3):
-                        new_history[row, axis] = old_history[old_row, axis]
-                    found = True
-                    break
-            if not found:
-                # Stored from b's side: xi is the relative displacement, so it flips sign.
-                for old_row in range(old_offsets[b], old_offsets[b + 1]):
-                    if old_partners[old_row] == a:
-                        for axis in range(3):
-                            new_history[row, axis] = -old_history[old_row, axis]
-                        break
-
-
 class VerletList:
-    """offsets (n+1), partners (int32), history (pairs, 3) aligned with partners."""
+    """row_particles (rows), offsets (rows+1), partners (int32), history (pairs, 3) aligned with partners."""
 
     def __init__(self):
+        self.row_particles = np.zeros(0, dtype=np.int64)
         self.offsets = np.zeros(1, dtype=np.int64)
         self.partners = np.zeros(0, dtype=np.int32)
         self.history = np.zeros((0, 3))
@@ -105,32 +92,76 @@ class VerletList:
     def pair_count(self) -> int:
         return len(self.partners)
 
-    def rebuild(self, state, skin: float) -> None:
-        """Sort particles by cell, rebuild the list, carry tangential history over."""
+    def pair_rows(self):
+        """(first particle, second particle) of every listed pair."""
+        return np.repeat(self.row_particles, np.diff(self.offsets)), self.partners.astype(np.int64)
+
+    def build(self, state, skin: float, records: np.ndarray) -> None:
+        """Rebuild over owned particles and ghosts; restore history from contact records."""
         count = state.count
         if count == 0:
             self.__init__()
+            self.builds = 1
             return
         cell_size = 2.0 * float(state.radii.max()) + skin
         lower, cell_size, dimensions = cell_grid(state.positions, cell_size)
         cells = cell_indices(state.positions, lower, cell_size, dimensions)
-        permutation = np.argsort(cells, kind="stable")
-        state.reorder(permutation)
-        cells = np.ascontiguousarray(cells[permutation])
-        starts = cell_starts(cells, int(np.prod(dimensions)))
+        order = np.argsort(cells, kind="stable")
+        sorted_cells = np.ascontiguousarray(cells[order])
+        starts = cell_starts(sorted_cells, int(np.prod(dimensions)))
         offsets = np.empty(count + 1, dtype=np.int64)
         # One pass when the capacity guess (last size + margin) suffices, two otherwise.
         partners = np.empty(int(1.25 * self.pair_count) + 4 * count, dtype=np.int32)
-        needed = _fill_pairs(state.positions, state.radii, skin, cells, starts, dimensions, _FORWARD_OFFSETS,
-                             offsets, partners)
+        arguments = (state.positions, state.radii, skin, state.owned_count, order, sorted_cells, starts,
+                     dimensions, _FORWARD_OFFSETS, offsets)
+        needed = _fill_pairs(*arguments, partners)
         if needed > len(partners):
             partners = np.empty(needed, dtype=np.int32)
-            _fill_pairs(state.positions, state.radii, skin, cells, starts, dimensions, _FORWARD_OFFSETS,
-                        offsets, partners)
-        partners = partners[:needed].copy()
-        history = np.zeros((needed, 3))
-        if self.pair_count and len(self.offsets) == count + 1:
-            _carry_history(offsets, partners, history, self.offsets, self.partners, self.history, permutation)
-        self.offsets, self.partners, self.history = offsets, partners, history
-        state.positions_at_build[:] = state.positions
+            _fill_pairs(*arguments, partners)
+        self.row_particles = order
+        self.offsets = offsets
+        self.partners = partners[:needed].copy()
+        self.history = np.zeros((needed, 3))
+        self._restore(state.ids, state.owned_count, records)
         self.builds += 1
+
+    def contact_records(self, ids: np.ndarray, owned_count: int) -> np.ndarray:
+        """History of the springs in use, one row per owned particle in contact (see module doc)."""
+        if self.pair_count == 0:
+            return np.zeros((0, RECORD_WIDTH))
+        first, second = self.pair_rows()
+        active = np.any(self.history != 0.0, axis=1)
+        first, second, history = first[active], second[active], self.history[active]
+        from_first = first < owned_count
+        from_second = second < owned_count
+        records = np.empty((int(from_first.sum() + from_second.sum()), RECORD_WIDTH))
+        split = int(from_first.sum())
+        records[:split, 0] = ids[first[from_first]]
+        records[:split, 1] = ids[second[from_first]]
+        records[:split, 2:] = history[from_first]
+        # xi is the first particle's displacement relative to the second: it flips with the orientation.
+        records[split:, 0] = ids[second[from_second]]
+        records[split:, 1] = ids[first[from_second]]
+        records[split:, 2:] = -history[from_second]
+        return records
+
+    def _restore(self, ids, owned_count, records):
+        if len(records) == 0 or self.pair_count == 0:
+            return
+        record_keys = _pair_keys(records[:, 0].astype(np.int64), records[:, 1].astype(np.int64))
+        order = np.argsort(record_keys)
+        record_keys = record_keys[order]
+        first, second = self.pair_rows()
+        first_owned = first < owned_count
+        owner = np.where(first_owned, first, second)
+        partner = np.where(first_owned, second, first)
+        keys = _pair_keys(ids[owner], ids[partner])
+        position = np.minimum(np.searchsorted(record_keys, keys), len(record_keys) - 1)
+        found = record_keys[position] == keys
+        sign = np.where(first_owned, 1.0, -1.0)
+        self.history[found] = records[order[position[found]], 2:] * sign[found, None]
+
+
+def _pair_keys(owner_ids, partner_ids):
+    # Global ids stay below 2^31 (documented limit), so the key is unique.
+    return owner_ids.astype(np.int64) * np.int64(2**31) + partner_ids.astype(np.int64)

@@ -1,35 +1,43 @@
-"""The particle system: state, neighbour list, walls and the step of the DEM.
+"""The particle system: state, neighbour list, walls, decomposition and the DEM step.
 
-Parallel model (until spatial decomposition lands): every rank holds all
-particles; rank r computes the contacts of the list rows and the wall contacts
-of particles in its owned slice, and the forces are summed over ranks with one
-buffer Allreduce.  Results equal the serial ones up to summation order.
+Parallel model: space is cut into one box per rank (RCB, weighted by cost).
+A rank integrates the particles it owns (rows [0, owned_count) of the state)
+and holds ghost copies of neighbours' particles within the ghost cutoff.  A
+pair across a box boundary is computed on both ranks, each keeping the force
+on its own particle, so no forces travel back.  At a list rebuild particles
+migrate to the rank owning their position, with their contact history; between
+rebuilds only ghost positions and velocities are exchanged.
+
+Other bodies the particles touch (mesh walls, cylinders, FE surfaces) plug in
+as *contributors*: objects with
+  name                                   unique name (for wall_force lookups)
+  move(dt)                               advance the body's own kinematics before forces
+  add_forces(system, first, last)        add contact forces of owned particles [first, last) to
+                                         system.state.forces/torques; return (elastic, dissipated, contacts)
+  reduce(comm)                           sum the body's rank-local totals (called when comm.size > 1)
+Their per-particle contact history lives in state.fields (ParticleState.add_field),
+so it is reordered and migrated with the particles.
 """
 from __future__ import annotations
+
+import logging
 
 import numpy as np
 from mpi4py import MPI
 
 from pdemfem.contact.forces import pair_forces, plane_wall_forces
+from pdemfem.neighbors.cells import cell_grid, cell_indices
 from pdemfem.neighbors.verlet import VerletList
+from pdemfem.parallel.decomposition import recursive_bisection
+from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.particles.integrate import drift, kick
+
+log = logging.getLogger("pdemfem")
 
 
 class ParticleSystem:
-    """DEM state and step.
-
-    Other bodies the particles touch (mesh walls, cylinders, FE surfaces) plug in
-    as *contributors*: objects with
-      name                                   unique name (for wall_force lookups)
-      move(dt)                               advance the body's own kinematics before forces
-      add_forces(system, first, last)        add contact forces of particles [first, last) to
-                                             system.state.forces/torques; return (elastic, dissipated, contacts)
-      reduce(comm)                           sum the body's rank-local totals (called when comm.size > 1)
-    Their per-particle contact history lives in state.fields (see ParticleState.add_field),
-    so it is reordered and migrated with the particles.
-    """
-
-    def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm, contributors=()):
+    def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm, contributors=(),
+                 domain_box=None, periodic_axes=(), rebalance_threshold: float = 1.2):
         self.state = state
         self.walls = walls
         self.tables = tables
@@ -37,68 +45,160 @@ class ParticleSystem:
         self.dt = float(dt)
         self.skin = float(skin)
         self.comm = comm
-        self.neighbors = VerletList()
         self.contributors = list(contributors)
+        self.neighbors = VerletList()
+        self.rebalance_threshold = float(rebalance_threshold)
+        self.domain_lower = np.full(3, -np.inf)
+        self.domain_upper = np.full(3, np.inf)
+        self.periodic_lengths = np.zeros(3)
+        if domain_box is not None:
+            self.domain_lower, self.domain_upper = (np.array(corner, dtype=float) for corner in domain_box)
+            for axis in periodic_axes:
+                index = "xyz".index(axis)
+                self.periodic_lengths[index] = self.domain_upper[index] - self.domain_lower[index]
+        self.decomposition = None
+        self.ghosts = None
         self.elastic_energy = 0.0
         self.dissipated_energy = 0.0
         self.contact_count = 0
-        self._rebuild()
+        self.lost_particles = 0
+        self.rebalances = 0
+        largest_radius = float(state.radii.max()) if state.count else 0.0
+        self.largest_radius = comm.allreduce(largest_radius, op=MPI.MAX)
+        # A ghost is needed when it can touch an owned particle before the next rebuild.
+        self.ghost_cutoff = 2.0 * self.largest_radius + self.skin
+        self._check_periodic_lengths()
+        self._rebuild(force_rebalance=True)
         self._compute_forces()
 
-    # ---------------------------------------------------------------- ownership
-    def owned_range(self) -> tuple:
-        """[first, last) of the particles this rank owns in the current order."""
-        count, size, rank = self.state.count, self.comm.size, self.comm.rank
-        return count * rank // size, count * (rank + 1) // size
+    def _check_periodic_lengths(self):
+        from pdemfem.errors import SceneError
+
+        for axis in range(3):
+            length = self.periodic_lengths[axis]
+            if 0 < length <= 2.0 * self.ghost_cutoff:
+                raise SceneError(f"domain.box ({'xyz'[axis]})",
+                                 f"the periodic length {length:g} m is not larger than twice the interaction cutoff "
+                                 f"{self.ghost_cutoff:g} m (largest diameter + skin)",
+                                 "enlarge the periodic domain or reduce the skin")
 
     # ---------------------------------------------------------------- the step
     def step(self) -> None:
         state, dt = self.state, self.dt
-        kick(state.velocities, state.angular_velocities, state.forces, state.torques, state.inverse_mass,
+        owned = state.owned_count
+        kick(owned, state.velocities, state.angular_velocities, state.forces, state.torques, state.inverse_mass,
              state.inverse_inertia, self.gravity, 0.5 * dt)
-        largest_displacement_squared = drift(state.positions, state.velocities, dt, state.positions_at_build)
+        largest_displacement_squared = drift(owned, state.positions, state.velocities, dt, state.positions_at_build)
+        if self.comm.size > 1:
+            largest_displacement_squared = self.comm.allreduce(largest_displacement_squared, op=MPI.MAX)
         self.walls.move(dt)
         for contributor in self.contributors:
             contributor.move(dt)
         if 4.0 * largest_displacement_squared > self.skin * self.skin:
             self._rebuild()
+        elif self.ghosts is not None:
+            self.ghosts.update(state)
         self._compute_forces()
-        kick(state.velocities, state.angular_velocities, state.forces, state.torques, state.inverse_mass,
-             state.inverse_inertia, self.gravity, 0.5 * dt)
+        kick(state.owned_count, state.velocities, state.angular_velocities, state.forces, state.torques,
+             state.inverse_mass, state.inverse_inertia, self.gravity, 0.5 * dt)
         # Work done on the particles by moving walls: -F_wall . v_wall dt.
         self.walls.work -= float(np.sum(self.walls.forces * self.walls.velocities)) * dt
 
-    def _rebuild(self) -> None:
-        if self.comm.size > 1 and self.neighbors.builds > 0:
-            self._share_history()
-        self.neighbors.rebuild(self.state, self.skin)
+    # ---------------------------------------------------------------- rebuild
+    def _rebuild(self, force_rebalance: bool = False) -> None:
+        """Migrate, (re)balance, sort, exchange ghosts and rebuild the list, keeping contact history."""
+        state = self.state
+        records = self.neighbors.contact_records(state.ids, state.owned_count)
+        costs = self._particle_costs()
+        state.drop_ghosts()
+        self._wrap_periodic()
+        costs = costs[self._remove_lost()]
+        if self.comm.size > 1 or self.decomposition is None or np.any(self.periodic_lengths > 0):
+            if force_rebalance or self.decomposition is None or self._imbalance(costs) > self.rebalance_threshold:
+                before = self._imbalance(costs)
+                self.decomposition = recursive_bisection(self.comm, state.positions, costs[:state.owned_count],
+                                                         self.domain_lower, self.domain_upper)
+                self.ghosts = GhostExchange(self.comm, self.decomposition, self.ghost_cutoff, self.periodic_lengths)
+                self.rebalances += 1
+                self._pending_rebalance_log = before
+            if self.comm.size > 1:
+                destinations = self.decomposition.owners(state.positions)
+                records = migrate(self.comm, state, destinations, records)
+        self._sort_owned()
+        if self.ghosts is not None:
+            self.ghosts.plan_and_send(state)
+        self.neighbors.build(state, self.skin, records)
+        state.positions_at_build = state.positions.copy()
+        if getattr(self, "_pending_rebalance_log", None) is not None and self.comm.size > 1:
+            after = self._imbalance(np.ones(state.owned_count) + self._rows_per_particle())
+            if self.comm.rank == 0:
+                log.info("rebalance %d: imbalance %.3f -> %.3f", self.rebalances, self._pending_rebalance_log, after)
+            self.last_imbalance = (self._pending_rebalance_log, after)
+        self._pending_rebalance_log = None
 
-    def _share_history(self) -> None:
-        """Make every rank's copy of the contact history complete before a rebuild.
+    def _particle_costs(self) -> np.ndarray:
+        """Cost per owned particle: 1 + its listed pairs (the force loop's work)."""
+        return 1.0 + self._rows_per_particle()
 
-        Each rank updated only the rows (and particles' wall springs) it owns;
-        the others are zeroed here and the copies summed.
-        """
-        first, last = self.owned_range()
-        history = self.neighbors.history
-        row_first, row_last = self.neighbors.offsets[first], self.neighbors.offsets[last]
-        history[:row_first] = 0.0
-        history[row_last:] = 0.0
-        self.comm.Allreduce(MPI.IN_PLACE, history, op=MPI.SUM)
-        for per_particle in (self.state.wall_history, *self.state.fields.values()):
-            per_particle[:first] = 0
-            per_particle[last:] = 0
-            self.comm.Allreduce(MPI.IN_PLACE, per_particle, op=MPI.SUM)
+    def _rows_per_particle(self) -> np.ndarray:
+        state = self.state
+        counts = np.zeros(state.count)
+        if self.neighbors.pair_count and len(self.neighbors.row_particles) == state.count:
+            first, second = self.neighbors.pair_rows()
+            counts += np.bincount(first, minlength=state.count)
+            counts += np.bincount(second, minlength=state.count)
+        return counts[:state.owned_count]
 
+    def _imbalance(self, costs: np.ndarray) -> float:
+        local = np.array([np.sum(costs[:self.state.owned_count])], dtype=float)
+        totals = np.empty(self.comm.size)
+        self.comm.Allgather(local, totals)
+        mean = float(totals.mean())
+        return float(totals.max()) / mean if mean > 0 else 1.0
+
+    def _wrap_periodic(self) -> None:
+        positions = self.state.positions
+        for axis in np.flatnonzero(self.periodic_lengths > 0):
+            lower, length = self.domain_lower[axis], self.periodic_lengths[axis]
+            positions[:, axis] = lower + np.mod(positions[:, axis] - lower, length)
+
+    def _remove_lost(self) -> np.ndarray:
+        """Remove particles outside the domain along non-periodic axes (counted, never kept at NaN).
+
+        Returns the mask of the owned particles that stayed."""
+        state = self.state
+        positions = state.positions[:state.owned_count]
+        bounded = np.isfinite(self.domain_lower) & (self.periodic_lengths == 0)
+        outside = ~np.all(np.isfinite(positions), axis=1)
+        if np.any(bounded):
+            outside |= np.any((positions < self.domain_lower) & bounded, axis=1)
+            outside |= np.any((positions > self.domain_upper) & bounded, axis=1)
+        lost = int(np.count_nonzero(outside))
+        if self.comm.size > 1:
+            lost = self.comm.allreduce(lost)
+        if lost:
+            state.keep(np.flatnonzero(~outside))
+            self.lost_particles += lost
+        return ~outside
+
+    def _sort_owned(self) -> None:
+        """Order owned particles by cell so that neighbours are close in memory."""
+        state = self.state
+        if state.owned_count < 2:
+            return
+        lower, size, dimensions = cell_grid(state.positions, 2.0 * self.largest_radius + self.skin)
+        state.reorder(np.argsort(cell_indices(state.positions, lower, size, dimensions), kind="stable"))
+
+    # ---------------------------------------------------------------- forces
     def _compute_forces(self) -> None:
         state, tables, walls, neighbors = self.state, self.tables, self.walls, self.neighbors
         state.forces[:] = 0.0
         state.torques[:] = 0.0
         walls.forces[:] = 0.0
-        first, last = self.owned_range()
+        owned = state.owned_count
         rolling = tables.rolling_enabled
         elastic, dissipated, contacts = pair_forces(
-            first, last, neighbors.offsets, neighbors.partners, neighbors.history,
+            neighbors.row_particles, neighbors.offsets, neighbors.partners, neighbors.history, state.ids, owned,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
             state.inverse_inertia, state.material_index,
             tables.effective_modulus, tables.effective_shear_modulus, tables.damping_coefficient,
@@ -107,7 +207,7 @@ class ParticleSystem:
             state.forces, state.torques)
         if walls.count:
             wall_elastic, wall_dissipated, wall_contacts = plane_wall_forces(
-                first, last, walls.points, walls.normals, walls.velocities, walls.material_index,
+                0, owned, walls.points, walls.normals, walls.velocities, walls.material_index,
                 state.wall_history, state.positions, state.velocities, state.angular_velocities, state.radii,
                 state.mass, state.inverse_inertia, state.material_index,
                 tables.effective_modulus, tables.effective_shear_modulus, tables.damping_coefficient,
@@ -118,15 +218,13 @@ class ParticleSystem:
             dissipated += wall_dissipated
             contacts += wall_contacts
         for contributor in self.contributors:
-            extra_elastic, extra_dissipated, extra_contacts = contributor.add_forces(self, first, last)
+            extra_elastic, extra_dissipated, extra_contacts = contributor.add_forces(self, 0, owned)
             elastic += extra_elastic
             dissipated += extra_dissipated
             contacts += extra_contacts
         if self.comm.size > 1:
             for contributor in self.contributors:
                 contributor.reduce(self.comm)
-            self.comm.Allreduce(MPI.IN_PLACE, state.forces, op=MPI.SUM)
-            self.comm.Allreduce(MPI.IN_PLACE, state.torques, op=MPI.SUM)
             if walls.count:
                 self.comm.Allreduce(MPI.IN_PLACE, walls.forces, op=MPI.SUM)
             scalars = np.array([elastic, dissipated, contacts], dtype=float)
@@ -136,18 +234,30 @@ class ParticleSystem:
         self.dissipated_energy += float(dissipated)
         self.contact_count = int(contacts)
 
-    # ---------------------------------------------------------------- energies
+    # ---------------------------------------------------------------- queries
+    def owned_range(self) -> tuple:
+        return 0, self.state.owned_count
+
+    def global_count(self) -> int:
+        return self.comm.allreduce(self.state.owned_count) if self.comm.size > 1 else self.state.owned_count
+
     def energies(self) -> dict:
         state = self.state
-        kinetic = 0.5 * float(np.sum(state.mass * np.einsum("ij,ij->i", state.velocities, state.velocities)))
-        inertia = 1.0 / state.inverse_inertia
-        rotational = 0.5 * float(np.sum(inertia * np.einsum("ij,ij->i", state.angular_velocities,
-                                                             state.angular_velocities)))
-        potential = -float(np.sum(state.mass * (state.positions @ self.gravity)))
+        owned = slice(0, state.owned_count)
+        mass = state.mass[owned]
+        velocities = state.velocities[owned]
+        spins = state.angular_velocities[owned]
+        local = np.array([
+            0.5 * float(np.sum(mass * np.einsum("ij,ij->i", velocities, velocities))),
+            0.5 * float(np.sum(np.einsum("ij,ij->i", spins, spins) / state.inverse_inertia[owned])),
+            -float(np.sum(mass * (state.positions[owned] @ self.gravity))),
+        ])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
         return {
-            "kinetic_energy": kinetic,
-            "rotational_energy": rotational,
-            "potential_energy": potential,
+            "kinetic_energy": float(local[0]),
+            "rotational_energy": float(local[1]),
+            "potential_energy": float(local[2]),
             "elastic_energy": self.elastic_energy,
             "dissipated_energy": self.dissipated_energy,
             "wall_work": self.walls.work,

@@ -198,6 +198,26 @@ class NeighborConfig(StrictModel):
     )
 
 
+class DomainConfig(StrictModel):
+    box: Optional[Tuple[Vector3, Vector3]] = Field(
+        None, description="simulation domain [[xmin,ymin,zmin],[xmax,ymax,zmax]]; particles leaving it are removed "
+                          "and counted (lost_particles); needed for periodic axes")
+    periodic: List[Literal["x", "y", "z"]] = Field(default_factory=list, description="periodic axes, e.g. [x]")
+
+    @model_validator(mode="after")
+    def _box_for_periodic(self):
+        if self.periodic and self.box is None:
+            raise ValueError("periodic axes need box: [[xmin,ymin,zmin],[xmax,ymax,zmax]] to set the period")
+        if self.box is not None and any(h <= l for l, h in zip(*self.box)):
+            raise ValueError("box must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] with every max > min")
+        return self
+
+
+class ParallelConfig(StrictModel):
+    rebalance_threshold: Annotated[float, Field(ge=1.0)] = Field(
+        1.2, description="re-partition the particles when max/mean rank cost exceeds this (checked at list rebuilds)")
+
+
 def _unknown_material(key: str, name: str, known) -> str:
     """'key: problem; fix' for a material name not under materials (a close name is suggested)."""
     close = difflib.get_close_matches(name, sorted(known), n=1)
@@ -214,6 +234,8 @@ class Scene(StrictModel):
     walls: List[WallConfig] = Field(default_factory=list)
     output: OutputConfig = Field(default_factory=OutputConfig)
     neighbors: NeighborConfig = Field(default_factory=NeighborConfig)
+    domain: DomainConfig = Field(default_factory=DomainConfig)
+    parallel: ParallelConfig = Field(default_factory=ParallelConfig)
 
     @model_validator(mode="after")
     def _references(self):

@@ -1,0 +1,1 @@
+"""MPI spatial decomposition of the particles: RCB boxes, migration, ghosts."""

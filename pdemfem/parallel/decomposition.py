@@ -1,0 +1,167 @@
+"""Recursive coordinate bisection (RCB) of space into one box per rank.
+
+The cut tree is built from the particles' positions weighted by their cost
+(1 + contacts): at each level every group of ranks splits its region along the
+region's longest axis at the coordinate that divides the group's weight in
+proportion to the ranks on each side.  The weighted median is found by
+bisection on the coordinate with one small Allreduce per iteration, so no
+particle data is gathered anywhere.  Outer faces extend to infinity (or to the
+periodic domain), so every point in space has exactly one owner.
+"""
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+from numba import njit
+
+# Bisection iterations for each cut; 2^-40 of the region's extent is far below
+# any particle size.
+CUT_ITERATIONS = 40
+
+
+class Decomposition:
+    """Boxes (ranks, 2, 3) and the cut tree that maps a point to its owner rank.
+
+    Tree arrays: for node k, `node_axis[k]`, `node_cut[k]`, `node_left[k]`,
+    `node_right[k]`; a child index < 0 is the leaf of rank -(child + 1).
+    """
+
+    def __init__(self, boxes, node_axis, node_cut, node_left, node_right):
+        self.boxes = boxes
+        self.node_axis = node_axis
+        self.node_cut = node_cut
+        self.node_left = node_left
+        self.node_right = node_right
+
+    @classmethod
+    def single(cls, lower, upper):
+        boxes = np.array([[lower, upper]], dtype=float)
+        leaf = np.array([-1], dtype=np.int64)
+        return cls(boxes, np.zeros(1, dtype=np.int64), np.array([np.inf]), leaf, leaf.copy())
+
+    def owners(self, positions: np.ndarray) -> np.ndarray:
+        return _owners(positions, self.node_axis, self.node_cut, self.node_left, self.node_right)
+
+
+@njit(cache=True)
+def _owners(positions, node_axis, node_cut, node_left, node_right):
+    result = np.empty(positions.shape[0], dtype=np.int64)
+    for i in range(positions.shape[0]):
+        node = 0
+        while True:
+            if positions[i, node_axis[node]] < node_cut[node]:
+                child = node_left[node]
+            else:
+                child = node_right[node]
+            if child < 0:
+                result[i] = -(child + 1)
+                break
+            node = child
+    return result
+
+
+def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition:
+    """RCB of the region [lower, upper] over comm.size ranks (collective).
+
+    `positions`/`weights` are this rank's particles; `lower`/`upper` bound the
+    region whose outer faces the boxes inherit (may be infinite).
+    """
+    size = comm.size
+    if size == 1:
+        return Decomposition.single(lower, upper)
+    # Finite extents for choosing axes and bisection ranges: the particles' global bounding box.
+    local_low = positions.min(axis=0) if len(positions) else np.full(3, np.inf)
+    local_high = positions.max(axis=0) if len(positions) else np.full(3, -np.inf)
+    data_low = np.empty(3)
+    data_high = np.empty(3)
+    comm.Allreduce(local_low, data_low, op=MPI.MIN)
+    comm.Allreduce(local_high, data_high, op=MPI.MAX)
+    data_low = np.where(np.isfinite(data_low), data_low, 0.0)
+    data_high = np.where(np.isfinite(data_high), data_high, 1.0)
+
+    boxes = np.empty((size, 2, 3))
+    node_axis, node_cut, node_left, node_right = [], [], [], []
+    # Work list of regions: (first rank, rank count, box lower, box upper, finite lower, finite upper, node slot)
+    regions = [(0, size, np.array(lower, float), np.array(upper, float), data_low.copy(), data_high.copy(), None)]
+    membership = np.zeros(len(positions), dtype=np.int64)  # index into `regions` of each particle
+    while regions:
+        splitting = [k for k, region in enumerate(regions) if region[1] > 1]
+        for k, region in enumerate(regions):
+            if region[1] == 1:
+                boxes[region[0], 0] = region[2]
+                boxes[region[0], 1] = region[3]
+                _link(node_left, node_right, region[6], -(region[0] + 1))
+        if not splitting:
+            break
+        count = len(splitting)
+        axes = np.array([int(np.argmax(regions[k][5] - regions[k][4])) for k in splitting])
+        low = np.array([regions[k][4][axes[n]] for n, k in enumerate(splitting)])
+        high = np.array([regions[k][5][axes[n]] for n, k in enumerate(splitting)])
+        fractions = np.array([(regions[k][1] // 2) / regions[k][1] for k in splitting])
+        slot_of_region = -np.ones(len(regions), dtype=np.int64)
+        slot_of_region[splitting] = np.arange(count)
+        # Particles of regions already finished (single-rank leaves) have membership -1.
+        particle_slot = np.where(membership >= 0, slot_of_region[np.maximum(membership, 0)], -1)
+        active = particle_slot >= 0
+        coordinate = positions[np.arange(len(positions)), axes[np.maximum(particle_slot, 0)]]
+        # astype: bincount of an empty selection returns integers, and Allreduce needs doubles everywhere.
+        totals = np.bincount(particle_slot[active], weights=weights[active], minlength=count).astype(float)
+        comm.Allreduce(MPI.IN_PLACE, totals, op=MPI.SUM)
+        cut_low, cut_high = low.copy(), high.copy()
+        for _ in range(CUT_ITERATIONS):
+            cut = 0.5 * (cut_low + cut_high)
+            left = active & (coordinate < cut[np.maximum(particle_slot, 0)])
+            left_weight = np.bincount(particle_slot[left], weights=weights[left], minlength=count).astype(float)
+            comm.Allreduce(MPI.IN_PLACE, left_weight, op=MPI.SUM)
+            too_heavy = left_weight > fractions * totals
+            cut_high = np.where(too_heavy, cut, cut_high)
+            cut_low = np.where(too_heavy, cut_low, cut)
+        cuts = 0.5 * (cut_low + cut_high)
+        new_regions = []
+        new_index_of = {}
+        for n, k in enumerate(splitting):
+            first, ranks, box_low, box_high, finite_low, finite_high, parent_slot = regions[k]
+            node = len(node_axis)
+            node_axis.append(axes[n])
+            node_cut.append(cuts[n])
+            node_left.append(0)
+            node_right.append(0)
+            _link(node_left, node_right, parent_slot, node)
+            left_ranks = ranks // 2
+            left_high, right_low = box_high.copy(), box_low.copy()
+            left_high[axes[n]] = cuts[n]
+            right_low[axes[n]] = cuts[n]
+            finite_left_high, finite_right_low = finite_high.copy(), finite_low.copy()
+            finite_left_high[axes[n]] = cuts[n]
+            finite_right_low[axes[n]] = cuts[n]
+            new_index_of[(k, 0)] = len(new_regions)
+            new_regions.append((first, left_ranks, box_low, left_high, finite_low, finite_left_high, (node, 0)))
+            new_index_of[(k, 1)] = len(new_regions)
+            new_regions.append((first + left_ranks, ranks - left_ranks, right_low, box_high, finite_right_low,
+                                finite_high, (node, 1)))
+        new_membership = np.full_like(membership, -1)
+        for n, k in enumerate(splitting):
+            mine = particle_slot == n
+            goes_right = coordinate[mine] >= cuts[n]
+            new_membership[mine] = np.where(goes_right, new_index_of[(k, 1)], new_index_of[(k, 0)])
+        membership = new_membership
+        regions = new_regions
+    if not node_axis:  # cannot happen for size > 1, kept for clarity
+        return Decomposition.single(lower, upper)
+    return Decomposition(boxes, np.array(node_axis, dtype=np.int64), np.array(node_cut, dtype=float),
+                         np.array(node_left, dtype=np.int64), np.array(node_right, dtype=np.int64))
+
+
+def _link(node_left, node_right, parent_slot, child):
+    if parent_slot is None:
+        return
+    parent, side = parent_slot
+    (node_left if side == 0 else node_right)[parent] = child
+
+
+def box_distance(points: np.ndarray, box_lower: np.ndarray, box_upper: np.ndarray) -> np.ndarray:
+    """Euclidean distance of each point to an axis-aligned box (0 inside)."""
+    below = np.maximum(box_lower - points, 0.0)
+    above = np.maximum(points - box_upper, 0.0)
+    gap = np.where(np.isfinite(below), below, 0.0) + np.where(np.isfinite(above), above, 0.0)
+    return np.sqrt(np.sum(gap * gap, axis=-1))

@@ -1,0 +1,185 @@
+"""Moving particles between ranks with buffer-based mpi4py calls.
+
+Migration (at list rebuilds): particles whose position now lies in another
+rank's box move there with every migrating field and their contact records,
+through Alltoall (counts) + Alltoallv (one float64 matrix).  Ghosts: copies of
+owned particles within the ghost cutoff of a neighbour's box (and of periodic
+images) are sent once in full at a rebuild and refreshed every step with
+positions and velocities only, point to point with the neighbour ranks.
+"""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from mpi4py import MPI
+
+from pdemfem.parallel.decomposition import box_distance
+
+_GHOST_TAG = 71  # counts on 71, rows on 72
+_GHOST_UPDATE_TAG = 81  # rows on 82
+
+
+def _alltoallv_rows(comm, rows: np.ndarray, destinations: np.ndarray, width: int) -> np.ndarray:
+    """Send row k of `rows` to rank destinations[k]; returns the rows received (by source rank)."""
+    size = comm.size
+    order = np.argsort(destinations, kind="stable")
+    send = np.ascontiguousarray(rows[order]).reshape(-1)
+    send_counts = np.bincount(destinations, minlength=size).astype(np.int64)
+    receive_counts = np.empty(size, dtype=np.int64)
+    comm.Alltoall(send_counts, receive_counts)
+    received = np.empty((int(receive_counts.sum()), width))
+    send_items = (send_counts * width).astype(np.int64)
+    receive_items = (receive_counts * width).astype(np.int64)
+    send_displacements = np.concatenate([[0], np.cumsum(send_items)[:-1]]).astype(np.int64)
+    receive_displacements = np.concatenate([[0], np.cumsum(receive_items)[:-1]]).astype(np.int64)
+    comm.Alltoallv([send, (send_items, send_displacements), MPI.DOUBLE],
+                   [received.reshape(-1), (receive_items, receive_displacements), MPI.DOUBLE])
+    return received
+
+
+def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.ndarray:
+    """Send owned particles (ghosts already dropped) to their destination ranks.
+
+    `records` are contact-history rows (owner id, partner id, xi_x, xi_y, xi_z)
+    of owned particles; they travel with their owner.  Returns this rank's records.
+    """
+    rank = comm.rank
+    layout, width = state.migrating_layout()
+    leaving = np.flatnonzero(destinations != rank)
+    packed = state.pack_rows(leaving, layout, width)
+    # Records follow their owner: look the owner id up among the owned ids.
+    owner_rows = _rows_of_ids(state.ids, records[:, 0].astype(np.int64)) if len(records) else np.zeros(0, np.int64)
+    record_destinations = destinations[owner_rows] if len(records) else np.zeros(0, dtype=np.int64)
+    staying = np.ones(state.owned_count, dtype=bool)
+    staying[leaving] = False
+    state.keep(np.flatnonzero(staying))
+    incoming = _alltoallv_rows(comm, packed, destinations[leaving].astype(np.int64), width)
+    state.append_rows(incoming, layout, as_ghosts=False)
+    kept_records = records[record_destinations == rank]
+    moving_records = record_destinations != rank
+    incoming_records = _alltoallv_rows(comm, records[moving_records],
+                                       record_destinations[moving_records].astype(np.int64), records.shape[1])
+    return np.concatenate([kept_records, incoming_records])
+
+
+def _rows_of_ids(ids: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    order = np.argsort(ids)
+    return order[np.searchsorted(ids, wanted, sorter=order)]
+
+
+class GhostExchange:
+    """Which owned particles are sent as ghosts to which neighbour, and the exchanges themselves."""
+
+    def __init__(self, comm, decomposition, cutoff: float, periodic_lengths: np.ndarray):
+        self.comm = comm
+        self.cutoff = float(cutoff)
+        rank = comm.rank
+        boxes = decomposition.boxes
+        shifts = [np.array(combination, dtype=float) * periodic_lengths
+                  for combination in itertools.product(*[(-1, 0, 1) if length > 0 else (0,)
+                                                          for length in periodic_lengths])]
+        # (neighbour rank, shift) pairs whose box is within the cutoff of our shifted box.
+        my_lower, my_upper = boxes[rank]
+        self.targets = []
+        for other in range(comm.size):
+            for shift in shifts:
+                if other == rank and not np.any(shift):
+                    continue
+                if _box_gap(my_lower + shift, my_upper + shift, boxes[other, 0], boxes[other, 1]) < self.cutoff:
+                    self.targets.append((other, shift, boxes[other, 0], boxes[other, 1]))
+        self.neighbours = sorted({target[0] for target in self.targets})
+        self.send_rows = {}
+        self.send_shifts = {}
+        self.receive_counts = {}
+
+    def plan_and_send(self, state) -> None:
+        """Choose the ghosts to send (at a rebuild), send them in full, append those received."""
+        owned = state.owned_count
+        positions = state.positions[:owned]
+        rows = {neighbour: [] for neighbour in self.neighbours}
+        shifts = {neighbour: [] for neighbour in self.neighbours}
+        for other, shift, lower, upper in self.targets:
+            near = np.flatnonzero(box_distance(positions + shift, lower, upper) < self.cutoff)
+            rows[other].append(near)
+            shifts[other].append(np.tile(shift, (len(near), 1)))
+        self.send_rows = {n: np.concatenate(rows[n]).astype(np.int64) if rows[n] else np.zeros(0, np.int64)
+                          for n in self.neighbours}
+        self.send_shifts = {n: np.concatenate(shifts[n]) if shifts[n] else np.zeros((0, 3))
+                            for n in self.neighbours}
+        layout, width = state.ghost_layout()
+        position_column = next(start for name, start, *_ in layout if name == "positions")
+        outgoing = {}
+        for neighbour in self.neighbours:
+            packed = state.pack_rows(self.send_rows[neighbour], layout, width)
+            packed[:, position_column:position_column + 3] += self.send_shifts[neighbour]
+            outgoing[neighbour] = packed
+        received = self._exchange(outgoing, width, _GHOST_TAG, counts_known=False)
+        for neighbour in self.neighbours:
+            self.receive_counts[neighbour] = len(received[neighbour])
+            if len(received[neighbour]):
+                state.append_rows(received[neighbour], layout, as_ghosts=True)
+
+    def update(self, state) -> None:
+        """Refresh ghost positions and velocities (every step between rebuilds)."""
+        if not self.neighbours:
+            return
+        outgoing = {}
+        for neighbour in self.neighbours:
+            rows = self.send_rows[neighbour]
+            packed = np.empty((len(rows), 9))
+            packed[:, 0:3] = state.positions[rows] + self.send_shifts[neighbour]
+            packed[:, 3:6] = state.velocities[rows]
+            packed[:, 6:9] = state.angular_velocities[rows]
+            outgoing[neighbour] = packed
+        received = self._exchange(outgoing, 9, _GHOST_UPDATE_TAG, counts_known=True)
+        start = state.owned_count
+        for neighbour in self.neighbours:
+            block = received[neighbour]
+            stop = start + len(block)
+            state.positions[start:stop] = block[:, 0:3]
+            state.velocities[start:stop] = block[:, 3:6]
+            state.angular_velocities[start:stop] = block[:, 6:9]
+            start = stop
+
+    def _exchange(self, outgoing: dict, width: int, tag: int, counts_known: bool) -> dict:
+        comm, rank = self.comm, self.comm.rank
+        if counts_known:
+            counts = self.receive_counts
+        else:
+            counts = {}
+            requests = []
+            count_buffers = {n: np.empty(1, dtype=np.int64) for n in self.neighbours}
+            for neighbour in self.neighbours:
+                if neighbour == rank:
+                    continue
+                requests.append(comm.Irecv(count_buffers[neighbour], source=neighbour, tag=tag))
+            send_counts = {n: np.array([len(outgoing[n])], dtype=np.int64) for n in self.neighbours}
+            for neighbour in self.neighbours:
+                if neighbour != rank:
+                    requests.append(comm.Isend(send_counts[neighbour], dest=neighbour, tag=tag))
+            MPI.Request.Waitall(requests)
+            for neighbour in self.neighbours:
+                counts[neighbour] = len(outgoing[neighbour]) if neighbour == rank else int(count_buffers[neighbour][0])
+        received = {}
+        requests = []
+        for neighbour in self.neighbours:
+            if neighbour == rank:
+                received[neighbour] = outgoing[neighbour].copy()
+                continue
+            received[neighbour] = np.empty((counts[neighbour], width))
+            requests.append(comm.Irecv(received[neighbour], source=neighbour, tag=tag + 1))
+        sends = []
+        for neighbour in self.neighbours:
+            if neighbour != rank:
+                sends.append(np.ascontiguousarray(outgoing[neighbour]))
+                requests.append(comm.Isend(sends[-1], dest=neighbour, tag=tag + 1))
+        MPI.Request.Waitall(requests)
+        return received
+
+
+def _box_gap(lower_a, upper_a, lower_b, upper_b) -> float:
+    with np.errstate(invalid="ignore"):
+        gaps = np.maximum(0.0, np.maximum(lower_b - upper_a, lower_a - upper_b))
+    gaps = np.where(np.isfinite(gaps), gaps, 0.0)
+    return float(np.sqrt(np.sum(gaps * gaps)))
