@@ -14,6 +14,8 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem.contact.tables import build_contact_tables
+from pdemfem.coupling.driver import CouplingDriver
+from pdemfem.coupling.surface import CoupledSurface
 from pdemfem.io.history import HistoryWriter
 from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.state import ParticleState
@@ -40,7 +42,10 @@ class Simulation:
         self.time = 0.0
         self.step_count = 0
         self._history = None
+        self.solids = self._build_solids()
         self.particle_system = self._build_particles()
+        self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt,
+                                       fem_every=scene.coupling.fem_every)
 
     # ------------------------------------------------------------ construction
     @classmethod
@@ -80,8 +85,13 @@ class Simulation:
         )
         count = total
         walls = PlaneWalls(plane_walls, tables.material_names)
-        # Mesh and cylinder walls plug into the particle system as contributors.
+        # Mesh and cylinder walls, and the solids' contact surfaces, plug into the particle system as contributors.
         self.contributor_walls = build_contributor_walls(scene, self.base_dir, tables.material_names)
+        self.coupled_surfaces = [
+            CoupledSurface(self.solids[config.name], tables.material_names.index(config.material))
+            for config in scene.solids if config.contact
+        ]
+        self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]
         smallest_radius = float(inserted.radii.min()) if count else 1.0
         skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
         return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm,
@@ -89,10 +99,29 @@ class Simulation:
                               domain_box=scene.domain.box, periodic_axes=scene.domain.periodic,
                               rebalance_threshold=scene.parallel.rebalance_threshold)
 
+    def _build_solids(self) -> dict:
+        """Deformable solids, each starting in static equilibrium under its constant loads."""
+        if not self.scene.solids:
+            return {}
+        from pdemfem.fem.solid import Solid
+
+        solids = {}
+        for config in self.scene.solids:
+            solid = Solid(config, self.scene.materials[config.material], gravity=self.scene.gravity,
+                          comm=self.comm, base_dir=self.base_dir)
+            held = self.comm.allreduce(int(solid.constrained_dofs.sum()))
+            if held:
+                solid.static_solve()
+            # else: a free body cannot be solved statically; it starts undeformed and at rest.
+            solids[config.name] = solid
+        return solids
+
     # ------------------------------------------------------------ stepping
     def step(self, count: int = 1) -> None:
         for _ in range(int(count)):
             self.particle_system.step()
+            if self.solids:
+                self.coupling.after_particle_step()
             self.step_count += 1
             self.time = self.step_count * self.dt
 
@@ -130,7 +159,9 @@ class Simulation:
         self.comm.Barrier()
         columns = ["time", "step", "particles", "kinetic_energy", "rotational_energy", "potential_energy",
                    "elastic_energy", "dissipated_energy", "wall_work", "contacts", "lost_particles"]
-        for name in (wall.name for wall in self.scene.walls):
+        if self.solids:
+            columns += ["solid_kinetic_energy", "solid_strain_energy", "solid_load_potential"]
+        for name in self._surface_names():
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
         self._history = HistoryWriter(self.output_dir / "history.csv", columns, self.comm.rank == 0,
                                       append=self.step_count > 0)
@@ -146,11 +177,15 @@ class Simulation:
                "lost_particles": system.lost_particles,
                "contacts": system.contact_count}
         row.update(self.energies())
-        for wall in self.scene.walls:
-            force = self.wall_force(wall.name)
+        for name in self._surface_names():
+            force = self.wall_force(name)
             for axis, label in enumerate("xyz"):
-                row[f"force_{wall.name}_{label}"] = force[axis]
+                row[f"force_{name}_{label}"] = force[axis]
         return row
+
+    def _surface_names(self) -> list:
+        """Walls, then the solids the particles can touch: each gets force_<name>_x/y/z columns."""
+        return [wall.name for wall in self.scene.walls] + [surface.name for surface in self.coupled_surfaces]
 
     def _write_history(self) -> None:
         if self._history is not None:
@@ -177,7 +212,7 @@ class Simulation:
         return self.particle_system.global_count()
 
     def wall_force(self, name: str) -> np.ndarray:
-        """Total contact force the particles exert on a wall (summed over ranks)."""
+        """Total contact force the particles exert on a wall or a solid's contact surface (summed over ranks)."""
         for wall in self.contributor_walls:
             if wall.name == name:
                 return wall.force
@@ -198,9 +233,29 @@ class Simulation:
 
     def energies(self) -> dict:
         energies = self.particle_system.energies()
-        # Work done on the particles by moving mesh and cylinder walls.
-        energies["wall_work"] += sum(wall.work for wall in self.contributor_walls)
+        # Work done on the particles by moving mesh and cylinder walls (the solids' surfaces are not
+        # moved by a prescription: their exchange with the particles is internal to the system).
+        energies["wall_work"] += sum(wall.work for wall in self.contributor_walls
+                                     if not any(wall is surface.triangle_surface for surface in self.coupled_surfaces))
+        energies["solid_kinetic_energy"] = sum(solid.kinetic_energy() for solid in self.solids.values())
+        energies["solid_strain_energy"] = sum(solid.strain_energy() for solid in self.solids.values())
+        # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
+        energies["solid_load_potential"] = -sum(solid.constant_load_vec.dot(solid.displacement_vec)
+                                                for solid in self.solids.values())
         return energies
+
+    def total_energy(self) -> float:
+        """Everything the bookkeeping tracks; constant up to integration error when no work is
+        fed in other than by moving walls (subtracted)."""
+        energies = self.energies()
+        return (energies["kinetic_energy"] + energies["rotational_energy"] + energies["potential_energy"]
+                + energies["elastic_energy"] + energies["dissipated_energy"] - energies["wall_work"]
+                + energies["solid_kinetic_energy"] + energies["solid_strain_energy"]
+                + energies["solid_load_potential"])
+
+    def solid_reaction(self, solid: str, group: str) -> np.ndarray:
+        """Total reaction force of a solid's support group (summed over ranks)."""
+        return self.solids[solid].reaction(group)
 
 
 def _progress_bar(total_steps: int, done_steps: int, enabled: bool):

@@ -9,7 +9,7 @@ from typing import Annotated, List, Literal, Optional, Tuple, Union
 
 from pydantic import Field, field_validator, model_validator
 
-from pdemfem.scene.schema import NonNegativeFloat, PositiveFloat, StrictModel, Vector3
+from pdemfem.config_types import NonNegativeFloat, PositiveFloat, StrictModel, Vector3
 
 BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 

@@ -9,16 +9,10 @@ from __future__ import annotations
 import difflib
 from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-PositiveFloat = Annotated[float, Field(gt=0)]
-NonNegativeFloat = Annotated[float, Field(ge=0)]
-Vector3 = Tuple[float, float, float]
-
-
-class StrictModel(BaseModel):
-    # Unknown keys are errors: a misspelt key must never be silently ignored.
-    model_config = ConfigDict(extra="forbid", frozen=False)
+from pdemfem.config_types import NonNegativeFloat, PositiveFloat, StrictModel, Vector3  # noqa: F401 (re-exported)
+from pdemfem.fem.config import SolidConfig
 
 
 class TimeConfig(StrictModel):
@@ -225,6 +219,12 @@ def _unknown_material(key: str, name: str, known) -> str:
     return f"{key}: unknown material '{name}'; {hint}define it under materials (known: {sorted(known)})"
 
 
+class CouplingConfig(StrictModel):
+    fem_every: Annotated[int, Field(ge=1)] = Field(
+        1, description="advance the solids every k DEM steps with the mean load of those steps "
+                       "(k x cheaper FE work; the surface lags up to k steps)")
+
+
 class Scene(StrictModel):
     time: TimeConfig
     gravity: Vector3 = (0.0, 0.0, -9.81)
@@ -236,6 +236,8 @@ class Scene(StrictModel):
     neighbors: NeighborConfig = Field(default_factory=NeighborConfig)
     domain: DomainConfig = Field(default_factory=DomainConfig)
     parallel: ParallelConfig = Field(default_factory=ParallelConfig)
+    solids: List[SolidConfig] = Field(default_factory=list)
+    coupling: CouplingConfig = Field(default_factory=CouplingConfig)
 
     @model_validator(mode="after")
     def _references(self):
@@ -255,6 +257,14 @@ class Scene(StrictModel):
                     f"interactions.{key}: name 'default' or 'materialA-materialB' with known materials "
                     f"(known: {sorted(known)})"
                 )
+        for index, solid in enumerate(self.solids):
+            if solid.material not in known:
+                raise ValueError(_unknown_material(f"solids[{index}].material", solid.material, known))
+        surface_names = [wall.name for wall in self.walls] + [solid.name for solid in self.solids]
+        clashes = sorted({name for name in surface_names if surface_names.count(name) > 1})
+        if clashes:
+            raise ValueError(f"walls/solids: names {clashes} are used twice; wall and solid names share one "
+                             f"namespace (wall_force, history columns): rename one")
         for kind, items in (("particles", self.particles), ("walls", self.walls)):
             names = [item.name for item in items]
             duplicates = sorted({name for name in names if names.count(name) > 1})

@@ -1,0 +1,1 @@
+"""Two-way DEM-FEM coupling through the solids' contact surfaces."""
