@@ -39,6 +39,9 @@ def process_environment(base: dict | None = None) -> dict:
         environment.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     # More ranks than cores is how decomposition is tested on small machines.
     environment.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
+    # A user error already printed one clear message; mpiexec's extra "process returned a
+    # non-zero exit code" banner would bury it.
+    environment.setdefault("OMPI_MCA_orte_execute_quiet", "1")
     # Containers often forbid cross-memory attach; without this Open MPI prints
     # errors on every large shared-memory message.
     environment.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")

@@ -159,7 +159,9 @@ def _lattice_positions(group, where: str, rng):
     if spacing < 2.0 * largest:
         raise SceneError(f"{where}.spacing", f"spacing {spacing} is smaller than the largest diameter {2 * largest}",
                          "use a spacing of at least the largest particle diameter, or leave it out")
-    per_axis = np.floor((high - low - 2.0 * largest) / spacing).astype(int) + 1
+    # Jitter moves a site by up to half of `jitter * gap` each way: keep that margin inside the box.
+    margin = 0.5 * insert.jitter * (spacing - 2.0 * largest)
+    per_axis = np.floor((high - low - 2.0 * largest - 2.0 * margin) / spacing).astype(int) + 1
     per_axis = np.maximum(per_axis, 0)
     capacity = int(np.prod(per_axis))
     if capacity < insert.count:
@@ -171,7 +173,7 @@ def _lattice_positions(group, where: str, rng):
     ix = index % per_axis[0]
     iy = (index // per_axis[0]) % per_axis[1]
     iz = index // (per_axis[0] * per_axis[1])
-    positions = low + largest + spacing * np.stack([ix, iy, iz], axis=1).astype(float)
+    positions = low + largest + margin + spacing * np.stack([ix, iy, iz], axis=1).astype(float)
     if insert.jitter > 0.0:
         gap = spacing - 2.0 * largest
         positions += rng.uniform(-0.5, 0.5, size=positions.shape) * insert.jitter * gap
