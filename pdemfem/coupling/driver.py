@@ -5,28 +5,75 @@ and computes every contact, including those with the mirrored FE surfaces at
 their current positions; the counter-forces are spread onto FE nodes; the solid
 advances; the mirrored vertices move to the new nodal positions.
 
-Time levels: the DEM force F^{n+1} acts on the particles through the two half
-kicks around t^{n+1} (impulse F dt), and on the solid through the central
-difference step t^{n+1} -> t^{n+2} (impulse F dt): the impulses match, so the
-total momentum of particles plus solid is conserved to round-off.
+Time levels (fem_every = 1).  The particle step n -> n+1 drifts the particles to
+x^{n+1} and evaluates the contact force F^{n+1} with the particle velocity
+v^{n+1/2} (after the first half kick).  For particles and solid to form one
+central-difference (velocity Verlet) system, the surface must be at u^{n+1} and
+move with v^{n+1/2} at that moment, and the solid must then take its step
+t^{n+1} -> t^{n+2} with F^{n+1} as the load at t^{n+1}.  The solid therefore
+runs one step *ahead* of the particles between coupling calls: at construction
+(after the initial contact evaluation F^0) the driver primes it with the step
+t^0 -> t^1 under F^0.  Without the prime the surface is one step stale (the
+force F^{n+1} loads the solid's step t^n -> t^{n+1}), a first-order error in the
+exchanged energy (measured: the energy error of an elastic impact halves with dt
+instead of quartering; tests/test_coupling_momentum.py).
+
+The surface velocity handed to the contacts is the mean velocity over the last
+advance, (u^{T} - u^{T-h}) / h (h = the advance interval), i.e. exactly the
+displacement increment the particles see divided by their step: for fem_every = 1
+that is v^{n+1/2}, the particle's own time level, also when the solid sub-steps.
+
+Momentum.  The particles receive F^{n+1} dt (two half kicks around t^{n+1}); the
+solid receives the same impulse through its step.  With the particles' momentum
+measured at the half level, m v^{n+1} + dt/2 F^{n+1} (the velocity after the next
+first half kick), particles + solid conserve linear momentum to round-off; the
+barycentric / quadratic-face spreading conserves force and moment exactly.
 
 Sub-cycling knobs:
 - fem_every = k: the solid advances every k DEM steps over k dt with the mean
-  (impulse-preserving) load of those steps; cheaper FE, surface k steps stale.
-- when the FE critical step is below the DEM step, Solid.advance covers each
-  interval with the fewest equal stable sub-steps.
+  (impulse-preserving) load of those steps.  The prime then covers (k+1)/2 dt,
+  so the surface the particles see during a window of k steps sits at the mean
+  time of the window, and the window's mean force loads the solid at that time
+  (second-order centring; the surface itself is frozen over k steps, the first-
+  order part of the sub-cycling error, measured in tests/test_coupling_ball.py).
+- when the FE critical step is below the interval, Solid.advance covers each
+  interval with the fewest equal stable sub-steps (fem_substeps[name]).
 """
 from __future__ import annotations
 
 
 class CouplingDriver:
-    def __init__(self, solids: dict, surfaces: list, dt: float, fem_every: int = 1):
+    def __init__(self, solids: dict, surfaces: list, dt: float, fem_every: int = 1, prime: bool = True):
+        """Collective.  Call after the particle system has evaluated its initial contacts (F^0)."""
         self.solids = solids
         self.surfaces = surfaces
         self.dt = float(dt)
         self.fem_every = int(fem_every)
         self.steps_since_advance = 0
         self.fem_substeps = {name: 1 for name in solids}
+        self.advances = 0
+        # How far (s) the solid runs ahead of the particles right after an advance.
+        self.lead = 0.5 * (self.fem_every + 1) * self.dt
+        if prime and solids:
+            self.prime()
+
+    def prime(self) -> None:
+        """Collective: advance the solids over the lead (k+1)/2 dt with the initial contacts' forces F^0.
+
+        The load is scaled so that the solid receives F^0 dt, the impulse the particles get from F^0."""
+        for surface in self.surfaces:
+            surface.collect_contact_forces()
+            surface.send_forces_to_solid(self.dt / self.lead)
+        self._advance_solids(self.lead)
+
+    def _advance_solids(self, interval: float) -> None:
+        for surface in self.surfaces:
+            surface.remember_positions()
+        for name, solid in self.solids.items():
+            self.fem_substeps[name] = solid.advance(interval)
+        for surface in self.surfaces:
+            surface.refresh_vertices(interval)
+        self.advances += 1
 
     def after_particle_step(self) -> None:
         """Collective: collect counter-forces, and every fem_every steps advance the solids."""
@@ -39,8 +86,15 @@ class CouplingDriver:
         for surface in self.surfaces:
             # Mean load over the interval: the same impulse as the per-step loads.
             surface.send_forces_to_solid(1.0 / self.steps_since_advance)
-        for name, solid in self.solids.items():
-            self.fem_substeps[name] = solid.advance(interval)
-        for surface in self.surfaces:
-            surface.refresh_vertices()
+        self._advance_solids(interval)
         self.steps_since_advance = 0
+
+    def pending_impulse(self) -> dict:
+        """Per surface, the impulse [N s] collected since the last advance but not yet given to the solid
+        (force sums x dt, this rank's contacts): what the solid still owes the particles within a window."""
+        return {surface.name: surface.accumulated_forces.sum(axis=0) * self.dt for surface in self.surfaces}
+
+    def refresh_surfaces(self) -> None:
+        """Collective: re-mirror the solids' state (e.g. after a restart set the solid state directly)."""
+        for surface in self.surfaces:
+            surface.refresh_vertices(None)

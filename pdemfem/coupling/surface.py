@@ -50,7 +50,15 @@ class CoupledSurface:
         self.solid.add_nodal_forces(self.node_indices[loaded], scale * self.accumulated_forces[loaded])
         self.accumulated_forces[:] = 0.0
 
-    def refresh_vertices(self) -> None:
-        """Collective: mirror the solid's current surface positions and velocities."""
+    def remember_positions(self) -> None:
+        """Keep the mirrored positions before an advance (for the mean surface velocity over it)."""
+        self._positions_before = self.triangle_surface.vertices.copy()
+
+    def refresh_vertices(self, interval=None) -> None:
+        """Collective: mirror the solid's current surface positions, and as velocities the mean over the
+        last advance of length `interval` (the displacement increment / interval: the velocity at the
+        particles' half step, see driver.py); interval None: the solid's own half-step velocities."""
         _, positions, velocities = self.solid.surface_state()
+        if interval is not None and getattr(self, "_positions_before", None) is not None:
+            velocities = (positions - self._positions_before) / interval
         self.triangle_surface.set_vertices(positions, velocities)
