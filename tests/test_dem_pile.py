@@ -46,14 +46,16 @@ def test_settled_pile_floor_force(model):
     W + (P_z(T) - P_z(0)) / T.  By Cauchy-Schwarz |P_z| = |sum m v_z| <= sqrt(2 M E_kin),
     hence |<F_floor,z> - W| <= 2 sqrt(2 M E_kin,max) / T.  A settled pack still rings at
     its contact frequencies (E_kin ~ 1e-10 J here, accelerations comparable to g), so the
-    instantaneous force is noisy; the average over T = 0.06 s is not.
+    instantaneous force is noisy; the average over T = 0.3 s is not.
     """
     sim = Simulation.from_dict(_pile_scene(model))
     state = sim.particle_system.state
     total_mass = float(state.mass.sum())
     weight = total_mass * G
-    sim.step(int(round(0.15 / sim.dt)))  # free fall over <= 10 mm (0.045 s) plus the bounces
-    window = int(round(0.06 / sim.dt))
+    # Free fall over <= 10 mm (0.045 s), the bounces, and the slow rearrangements: by 0.35 s the
+    # pack only rings (E_kin ~ 1e-10 J; measured at 0.15 s it is still ~1e-7 J and settling).
+    sim.step(int(round(0.35 / sim.dt)))
+    window = int(round(0.3 / sim.dt))
     momentum_before = float(np.sum(sim.particle_system.state.mass * sim.particle_system.state.velocities[:, 2]))
     floor_sum, kinetic_max = 0.0, 0.0
     for _ in range(window):
@@ -66,7 +68,7 @@ def test_settled_pile_floor_force(model):
     span = window * sim.dt
     # The identity itself (velocity Verlet sums forces by the trapezoidal rule; the end
     # terms differ by dt/2 (F_0 - F_T), bounded by the force noise): 
-    assert abs(floor - weight + (momentum_after - momentum_before) / span) < 1e-3 * weight
+    assert abs(floor - weight - (momentum_after - momentum_before) / span) < 1e-3 * weight
     bound = 2.0 * np.sqrt(2.0 * total_mass * kinetic_max) / span
     assert abs(floor - weight) <= bound * (1.0 + 1e-9)
     assert abs(floor / weight - 1.0) < 1e-3, (floor / weight - 1.0, bound / weight)

@@ -270,75 +270,77 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
 
 
 @njit(cache=True)
-def plane_wall_forces(first, last, wall_points, wall_normals, wall_velocities, wall_material,
-                      wall_history, positions, velocities, angular_velocities, radii, mass, inverse_inertia,
-                      material_index, effective_modulus, effective_shear_modulus, damping, friction,
+def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_normals, wall_velocities,
+                      wall_material, wall_history, positions, velocities, angular_velocities, radii, mass,
+                      inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping, friction,
                       rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed,
                       dt, rolling_enabled, forces, torques, wall_forces):
-    """Add the forces of particles [first, last) against every plane wall.
+    """Add the forces of the candidate (particle, plane wall) pairs.
 
-    A wall is a flat rigid body (R = inf, m = inf); wall_forces[w] receives the
-    force the particles exert on wall w.  Returns (elastic, dissipated, contacts).
+    Candidates are the owned particles within radius + skin of a wall at the last
+    list build (every other pair cannot touch before the next one).  A wall is a
+    flat rigid body (R = inf, m = inf); wall_forces[w] receives the force the
+    particles exert on wall w.  Returns (elastic, dissipated, contacts).
     """
     elastic_total = 0.0
     dissipated_total = 0.0
     contacts = 0
-    wall_count = wall_points.shape[0]
-    for i in range(first, last):
+    for candidate in range(candidate_particles.shape[0]):
+        i = candidate_particles[candidate]
+        w = candidate_walls[candidate]
         radius = radii[i]
-        for w in range(wall_count):
-            nx = wall_normals[w, 0]
-            ny = wall_normals[w, 1]
-            nz = wall_normals[w, 2]
-            distance = ((positions[i, 0] - wall_points[w, 0]) * nx
-                        + (positions[i, 1] - wall_points[w, 1]) * ny
-                        + (positions[i, 2] - wall_points[w, 2]) * nz)
-            overlap = radius - distance
-            if overlap <= 0.0:
-                xi_squared = wall_history[i, w, 0] ** 2 + wall_history[i, w, 1] ** 2 + wall_history[i, w, 2] ** 2
-                if xi_squared > 0.0:
-                    # The contact opened this step: its spring energy (booked as elastic) is lost.
-                    previous_distance = distance - dt * ((velocities[i, 0] - wall_velocities[w, 0]) * nx
-                                                         + (velocities[i, 1] - wall_velocities[w, 1]) * ny
-                                                         + (velocities[i, 2] - wall_velocities[w, 2]) * nz)
-                    material_i = material_index[i]
-                    material_w = wall_material[w]
-                    dissipated_total += released_spring_energy(
-                        model_code[material_i, material_w], radius - previous_distance, xi_squared, mass[i], radius,
-                        effective_modulus[material_i, material_w], effective_shear_modulus[material_i, material_w],
-                        normal_stiffness[material_i, material_w], tangential_ratio[material_i, material_w],
-                        characteristic_speed)
-                wall_history[i, w, 0] = 0.0
-                wall_history[i, w, 1] = 0.0
-                wall_history[i, w, 2] = 0.0
-                continue
-            # Contact point on the plane, `distance` below the centre.
-            lever = distance
-            wx = angular_velocities[i, 0]
-            wy = angular_velocities[i, 1]
-            wz = angular_velocities[i, 2]
-            vx = velocities[i, 0] - wall_velocities[w, 0] - lever * (wy * nz - wz * ny)
-            vy = velocities[i, 1] - wall_velocities[w, 1] - lever * (wz * nx - wx * nz)
-            vz = velocities[i, 2] - wall_velocities[w, 2] - lever * (wx * ny - wy * nx)
-            material_i = material_index[i]
-            material_w = wall_material[w]
-            fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
-                nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, mass[i], radius,
-                effective_modulus[material_i, material_w], effective_shear_modulus[material_i, material_w],
-                damping[material_i, material_w], friction[material_i, material_w],
-                rolling_friction[material_i, material_w], model_code[material_i, material_w],
-                normal_stiffness[material_i, material_w], tangential_ratio[material_i, material_w],
-                characteristic_speed, 1.0 / inverse_inertia[i], wall_history[i], w, dt, rolling_enabled)
-            elastic_total += elastic
-            dissipated_total += dissipated
-            contacts += 1
-            forces[i, 0] += fx
-            forces[i, 1] += fy
-            forces[i, 2] += fz
-            wall_forces[w, 0] -= fx
-            wall_forces[w, 1] -= fy
-            wall_forces[w, 2] -= fz
-            torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
-            torques[i, 1] += -lever * (nz * fx - nx * fz) + my
-            torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
+        nx = wall_normals[w, 0]
+        ny = wall_normals[w, 1]
+        nz = wall_normals[w, 2]
+        distance = ((positions[i, 0] - wall_points[w, 0]) * nx
+                    + (positions[i, 1] - wall_points[w, 1]) * ny
+                    + (positions[i, 2] - wall_points[w, 2]) * nz)
+        overlap = radius - distance
+        if overlap <= 0.0:
+            xi_squared = wall_history[i, w, 0] ** 2 + wall_history[i, w, 1] ** 2 + wall_history[i, w, 2] ** 2
+            if xi_squared > 0.0:
+                # The contact opened this step: its spring energy (booked as elastic) is lost.
+                previous_distance = distance - dt * ((velocities[i, 0] - wall_velocities[w, 0]) * nx
+                                                     + (velocities[i, 1] - wall_velocities[w, 1]) * ny
+                                                     + (velocities[i, 2] - wall_velocities[w, 2]) * nz)
+                material_i = material_index[i]
+                material_w = wall_material[w]
+                dissipated_total += released_spring_energy(
+                    model_code[material_i, material_w], radius - previous_distance, xi_squared, mass[i], radius,
+                    effective_modulus[material_i, material_w], effective_shear_modulus[material_i, material_w],
+                    normal_stiffness[material_i, material_w], tangential_ratio[material_i, material_w],
+                    characteristic_speed)
+            wall_history[i, w, 0] = 0.0
+            wall_history[i, w, 1] = 0.0
+            wall_history[i, w, 2] = 0.0
+            continue
+        # Contact point on the plane, `distance` below the centre.
+        lever = distance
+        wx = angular_velocities[i, 0]
+        wy = angular_velocities[i, 1]
+        wz = angular_velocities[i, 2]
+        vx = velocities[i, 0] - wall_velocities[w, 0] - lever * (wy * nz - wz * ny)
+        vy = velocities[i, 1] - wall_velocities[w, 1] - lever * (wz * nx - wx * nz)
+        vz = velocities[i, 2] - wall_velocities[w, 2] - lever * (wx * ny - wy * nx)
+        material_i = material_index[i]
+        material_w = wall_material[w]
+        fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
+            nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, mass[i], radius,
+            effective_modulus[material_i, material_w], effective_shear_modulus[material_i, material_w],
+            damping[material_i, material_w], friction[material_i, material_w],
+            rolling_friction[material_i, material_w], model_code[material_i, material_w],
+            normal_stiffness[material_i, material_w], tangential_ratio[material_i, material_w],
+            characteristic_speed, 1.0 / inverse_inertia[i], wall_history[i], w, dt, rolling_enabled)
+        elastic_total += elastic
+        dissipated_total += dissipated
+        contacts += 1
+        forces[i, 0] += fx
+        forces[i, 1] += fy
+        forces[i, 2] += fz
+        wall_forces[w, 0] -= fx
+        wall_forces[w, 1] -= fy
+        wall_forces[w, 2] -= fz
+        torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
+        torques[i, 1] += -lever * (nz * fx - nx * fz) + my
+        torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
     return elastic_total, dissipated_total, contacts

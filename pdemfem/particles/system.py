@@ -94,7 +94,10 @@ class ParticleSystem:
         self.walls.move(dt)
         for contributor in self.contributors:
             contributor.move(dt)
-        if 4.0 * largest_displacement_squared > self.skin * self.skin:
+        # A pair (or particle-wall pair) can only close the skin if the two moved more than skin in sum.
+        largest_displacement = (np.sqrt(largest_displacement_squared)
+                                + self.walls.largest_displacement_since_build())
+        if 2.0 * largest_displacement > self.skin:
             self._rebuild()
         elif self.ghosts is not None:
             self.ghosts.update(state)
@@ -105,16 +108,41 @@ class ParticleSystem:
         self.walls.work -= float(np.sum(self.walls.forces * self.walls.velocities)) * dt
 
     # ---------------------------------------------------------------- rebuild
-    def _rebuild(self, force_rebalance: bool = False) -> None:
+    def canonical_rebuild(self, records=None, decomposition=None) -> None:
+        """A rebuild whose outcome depends only on the particles (by id), the contact records and
+        the decomposition -- not on the row order or the previous list (checkpoint/restart).
+
+        Checkpoint steps call it in the running and in the restarted simulation alike, so the
+        continuation sums every force in the same order (bit-identical on the same rank count).
+        The decomposition is kept (or replaced by `decomposition`); rows are put in id order
+        before the cell sort; the last step's forces and torques travel with their particles
+        (velocity Verlet's first half kick needs them).  `records`: contact-history rows
+        (owner id, partner id, xi) to restore instead of the current list's.
+        """
+        from pdemfem.parallel.exchange import GhostExchange
+
+        state = self.state
+        for name in ("forces", "torques"):
+            state.add_field(f"carry:{name}", (3,))[:] = getattr(state, name)
+        if decomposition is not None:
+            self.decomposition = decomposition
+            self.ghosts = GhostExchange(self.comm, decomposition, self.ghost_cutoff, self.periodic_lengths)
+        self._rebuild(records=records, canonical=True)
+        for name in ("forces", "torques"):
+            setattr(state, name, state.fields.pop(f"carry:{name}"))
+
+    def _rebuild(self, force_rebalance: bool = False, records=None, canonical: bool = False) -> None:
         """Migrate, (re)balance, sort, exchange ghosts and rebuild the list, keeping contact history."""
         state = self.state
-        records = self.neighbors.contact_records(state.ids, state.owned_count)
+        if records is None:
+            records = self.neighbors.contact_records(state.ids, state.owned_count)
         costs = self._particle_costs()
         state.drop_ghosts()
         self._wrap_periodic()
         costs = costs[self._remove_lost()]
         if self.comm.size > 1 or self.decomposition is None or np.any(self.periodic_lengths > 0):
-            if force_rebalance or self.decomposition is None or self._imbalance(costs) > self.rebalance_threshold:
+            if (not canonical or self.decomposition is None) and (
+                    force_rebalance or self.decomposition is None or self._imbalance(costs) > self.rebalance_threshold):
                 before = self._imbalance(costs)
                 self.decomposition = recursive_bisection(self.comm, state.positions, costs[:state.owned_count],
                                                          self.domain_lower, self.domain_upper)
@@ -124,10 +152,13 @@ class ParticleSystem:
             if self.comm.size > 1:
                 destinations = self.decomposition.owners(state.positions)
                 records = migrate(self.comm, state, destinations, records)
+        if canonical and state.owned_count:
+            state.reorder(np.argsort(state.ids, kind="stable"))  # the cell sort is stable: ties by id
         self._sort_owned()
         if self.ghosts is not None:
             self.ghosts.plan_and_send(state)
         self.neighbors.build(state, self.skin, records)
+        self.walls.build_candidates(state.positions[:state.owned_count], state.radii[:state.owned_count], self.skin)
         state.positions_at_build = state.positions.copy()
         if getattr(self, "_pending_rebalance_log", None) is not None and self.comm.size > 1:
             after = self._imbalance(np.ones(state.owned_count) + self._rows_per_particle())
@@ -207,7 +238,7 @@ class ParticleSystem:
             state.forces, state.torques)
         if walls.count:
             wall_elastic, wall_dissipated, wall_contacts = plane_wall_forces(
-                0, owned, walls.points, walls.normals, walls.velocities, walls.material_index,
+                walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities, walls.material_index,
                 state.wall_history, state.positions, state.velocities, state.angular_velocities, state.radii,
                 state.mass, state.inverse_inertia, state.material_index,
                 tables.effective_modulus, tables.effective_shear_modulus, tables.damping_coefficient,

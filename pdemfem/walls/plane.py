@@ -18,6 +18,10 @@ class PlaneWalls:
         self.material_index = np.array([material_names.index(wall.material) for wall in wall_configs],
                                        dtype=np.int32)
         self.forces = np.zeros((count, 3))
+        # (particle, wall) pairs that may touch before the next list build, particle-major.
+        self.candidate_particles = np.zeros(0, dtype=np.int64)
+        self.candidate_walls = np.zeros(0, dtype=np.int64)
+        self.points_at_build = self.points.copy()
         # Work the walls have done on the particles (a moving wall feeds energy in).
         self.work = 0.0
 
@@ -27,6 +31,23 @@ class PlaneWalls:
 
     def move(self, dt: float) -> None:
         self.points += dt * self.velocities
+
+    def largest_displacement_since_build(self) -> float:
+        if not self.count:
+            return 0.0
+        return float(np.sqrt(np.max(np.sum((self.points - self.points_at_build) ** 2, axis=1))))
+
+    def build_candidates(self, positions: np.ndarray, radii: np.ndarray, skin: float) -> None:
+        """Owned particles within radius + skin of each wall (the wall side or behind it)."""
+        self.points_at_build = self.points.copy()
+        if not self.count or not len(positions):
+            self.candidate_particles = np.zeros(0, dtype=np.int64)
+            self.candidate_walls = np.zeros(0, dtype=np.int64)
+            return
+        distances = np.einsum("pk,wk->pw", positions, self.normals) - np.sum(self.points * self.normals, axis=1)
+        near = distances < (radii + skin)[:, None]
+        self.candidate_particles, self.candidate_walls = (np.ascontiguousarray(a, dtype=np.int64)
+                                                          for a in np.nonzero(near))
 
     def index(self, name: str) -> int:
         try:

@@ -2,8 +2,9 @@
 
 usage: dem_agreement.py OUT.npz STEPS [ulp]
 Writes (rank 0) positions and velocities sorted by id, the contact count and every
-wall force after STEPS steps.  "ulp" (serial only) shifts particle 0 by one unit in
-the last place of its x coordinate before the run: the round-off growth reference.
+wall force after STEPS steps.  "ulp" (serial only) shifts every particle by one unit
+in the last place of its x coordinate before the run: the round-off growth reference
+(a different summation order perturbs every particle's force by round-off).
 """
 import sys
 from pathlib import Path
@@ -25,8 +26,8 @@ def main():
     sim = Simulation.from_dict(dense_scene(count=200), comm=comm, output_dir=str(Path(out).parent / "unused"))
     if perturb:
         state = sim.particle_system.state
-        row = np.nonzero(state.ids == 0)[0]
-        state.positions[row, 0] += np.spacing(state.positions[row, 0])
+        owned = slice(0, state.owned_count)
+        state.positions[owned, 0] += np.spacing(state.positions[owned, 0])
     sim.step(steps)
     p = sim.particles
     ids = comm.gather(p.ids, root=0)
