@@ -1,0 +1,117 @@
+"""A free elastic block (no supports, no gravity) hit by a particle: momentum and energy of the coupled system.
+
+Momentum.  The particle gets the contact force F^{n+1} as two half kicks around t^{n+1}; the solid gets
+the same impulse F^{n+1} dt through its central-difference step (driver.py).  Measured at matching levels
+-- particle m v^{n+1} + dt/2 F^{n+1} (the velocity after the next first half kick), solid sum m_i v_i^{n+3/2}
+(lumped mass x half-step nodal velocities), plus with fem_every = k the impulse collected but not yet
+handed to the solid -- the total is conserved to round-off at every step.
+
+Energy (restitution 1: no damping; no friction).  The FE part of central differences conserves exactly
+the modified energy 1/2 v^{n-1/2} M v^{n+1/2} + 1/2 u^n K u^n; the only integration error is velocity
+Verlet's on the (nonlinear) Hertz contact, whose energy oscillates within (omega dt)^2 / 4 of the
+conserved shadow energy for a harmonic oscillator of frequency omega.  The stiffest moment of the
+contact is at the largest overlap: omega_peak^2 = S_n(delta_max) / m with S_n = 2 E* sqrt(R delta_max).
+"""
+import math
+
+import numpy as np
+import pytest
+
+from mpi_cases.coupling_scenes import free_block_impact
+from pdemfem import Simulation
+
+EPS = np.finfo(float).eps
+
+
+def setup(tmp_path, **options):
+    sim = Simulation.from_dict(free_block_impact(**options), output_dir=str(tmp_path))
+    solid = sim.solids["block"]
+    assert solid.lumped
+    mass = solid.lumped_mass.getArray(readonly=True).reshape(-1, 3)  # nodal lumped mass, per dof
+    return sim, solid, mass
+
+
+def momenta(sim, solid, mass):
+    state = sim.particle_system.state
+    n = state.owned_count
+    particle = (state.mass[:n, None] * state.velocities[:n]).sum(axis=0) + 0.5 * sim.dt * state.forces[:n].sum(axis=0)
+    block = (mass * solid.velocities).sum(axis=0)
+    pending = sum(sim.coupling.pending_impulse().values())  # the solid's share not yet handed over
+    return particle, block + pending
+
+
+@pytest.mark.parametrize("element, fem_every, offset, tangential, friction", [
+    ("P1", 1, (0.0, 0.0), 0.0, 0.0),
+    ("P1", 3, (0.031, -0.017), 0.4, 0.5),   # off centre and oblique, with friction: the block spins
+    ("P2", 1, (0.031, -0.017), 0.4, 0.5),
+])
+def test_linear_momentum_conserved_to_round_off(tmp_path, element, fem_every, offset, tangential, friction):
+    sim, solid, mass = setup(tmp_path, element=element, fem_every=fem_every, offset=offset, tangential=tangential,
+                             friction=friction, restitution=0.5)
+    p0 = sum(momenta(sim, solid, mass))
+    steps = 500  # 10 ms: approach (2 mm at 1 m/s), the ~3.7 ms contact and separation
+    worst, peak, touched = 0.0, 0.0, 0
+    for _ in range(steps):
+        sim.step()
+        worst = max(worst, float(np.max(np.abs(sum(momenta(sim, solid, mass)) - p0))))
+        force = np.linalg.norm(sim.wall_force("block"))
+        peak = max(peak, force)
+        touched += force > 0
+    particle, block = momenta(sim, solid, mass)
+    assert touched > 100 and np.linalg.norm(block) > 0.2 * np.linalg.norm(p0)  # a real exchange happened
+    # Round-off per step: the particle update errs by ~eps |p0|; the solid's momentum sum over its n nodes
+    # by n eps (|p0| + dt |f|max) where the nodal forces (contact + elastic K u, whose column sums vanish
+    # only to round-off) are bounded by the peak contact force times the node count.
+    nodes = len(mass)
+    per_step = EPS * (np.linalg.norm(p0) + nodes * (np.linalg.norm(p0) + sim.dt * nodes * peak))
+    tolerance = steps * per_step
+    print(f"{element} k={fem_every}: momentum drift {worst:.3g} (tolerance {tolerance:.3g}), |p0| {np.linalg.norm(p0):.4g}")
+    assert worst <= tolerance
+
+
+def strain_energy(solid, u):
+    x = solid.displacement_vec.duplicate()
+    x.setArray(u)
+    y = x.duplicate()
+    solid.stiffness.mult(x, y)
+    return 0.5 * y.dot(x)
+
+
+@pytest.mark.parametrize("element", ["P1", "P2"])
+def test_energy_conserved_within_the_verlet_bound(tmp_path, element):
+    dt, speed = 2e-5, 1.0
+    sim, solid, mass = setup(tmp_path, element=element, dt=dt, speed=speed)
+    lumped = mass.ravel()
+    state = sim.particle_system.state
+    m = float(state.mass[0])
+    e0 = 0.5 * m * speed**2
+    # The solid runs one step ahead (driver.py): after the step to t^{n+1} it holds u^{n+2}, v^{n+3/2};
+    # the previous step's u^{n+1}, v^{n+1/2} give its energy at the particles' level t^{n+1}.
+    u_prev = solid.displacement_vec.getArray(readonly=True).copy()
+    v_prev = solid.velocity_vec.getArray(readonly=True).copy()
+    worst, final = 0.0, None
+    for _ in range(450):
+        sim.step()
+        u = solid.displacement_vec.getArray(readonly=True).copy()
+        v = solid.velocity_vec.getArray(readonly=True).copy()
+        energies = sim.energies()
+        total = (0.5 * m * float(np.sum(state.velocities[0] ** 2)) + energies["rotational_energy"]
+                 + energies["elastic_energy"] + energies["dissipated_energy"]
+                 + 0.5 * float(np.dot(v_prev * lumped, v)) + strain_energy(solid, u_prev))
+        final = total - e0
+        worst = max(worst, abs(final))
+        u_prev, v_prev = u, v
+    assert energies["dissipated_energy"] == 0.0 and energies["elastic_energy"] == 0.0  # separated, no damping
+    assert solid.kinetic_energy() > 0.3 * e0  # the block took a large share
+    # Bound: (omega_peak dt)^2 / 4 of the impact energy (module docstring), with the rigid-wall Hertz
+    # overlap (the block's own compliance only softens the contact, lowering omega).
+    grain = {"E": 1e8, "nu": 0.25}
+    rubber = {"E": 2e8, "nu": 0.3}
+    e_star = 1.0 / ((1 - grain["nu"] ** 2) / grain["E"] + (1 - rubber["nu"] ** 2) / rubber["E"])
+    radius = 0.05
+    delta_max = (15 * m * speed**2 / (16 * e_star * math.sqrt(radius))) ** 0.4
+    omega = math.sqrt(2 * e_star * math.sqrt(radius * delta_max) / m)
+    bound = (omega * dt) ** 2 / 4 * e0
+    print(f"{element}: energy error max {worst / e0:.3g}, after separation {final / e0:.3g} of E0 "
+          f"(bound {bound / e0:.3g})")
+    assert worst <= bound
