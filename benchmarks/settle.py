@@ -60,6 +60,7 @@ REFERENCE_SITES_PER_SIDE = 25   # 25 * 2.4 mm = 60 mm
 REFERENCE_HEIGHT = 0.12
 LIGGGHTS_SEED = 15485863        # LIGGGHTS wants a prime > 10000
 WORKER_FLAG = "--worker-json"
+OVERHEAD_STEPS = 2000   # steps of the 27-particle copy that measure the fixed cost per step
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -181,6 +182,10 @@ def run_pdemfem(args) -> dict:
         tiny = Simulation.from_dict(scene_dict(27), comm=comm, output_dir=os.path.join(scratch, "tiny"))
         tiny.step(3)
         compile_seconds = time.perf_counter() - compile_start
+        # Fixed cost of a step (Python, kernel launches) where particles cost nothing (DESIGN.md 7).
+        overhead_start = time.perf_counter()
+        tiny.step(OVERHEAD_STEPS)
+        overhead_seconds = comm.allreduce(time.perf_counter() - overhead_start, op=MPI.MAX) / OVERHEAD_STEPS
         del tiny
         gc.collect()
 
@@ -265,6 +270,8 @@ def run_pdemfem(args) -> dict:
         "ranks": ranks,
         "wall_seconds": seconds,
         "cpu_share": cpu_share,
+        "cpu_seconds": cpu_share * seconds * ranks,
+        "particle_steps_per_cpu_second": particle_steps / (cpu_share * seconds * ranks),
         "particle_steps_per_second": particle_steps / seconds,
         "particle_steps_per_second_per_core": particle_steps / seconds / ranks,
         "mean_contacts": mean_contacts,
@@ -275,6 +282,7 @@ def run_pdemfem(args) -> dict:
         "peak_rss_megabytes_rank0": peak_rss / 2**20,
         "neighbour_list_pairs_at_end": list_pairs,
         "neighbour_list_builds_total": builds,
+        "step_overhead_microseconds_27_particles": 1e6 * overhead_seconds,
         "compile_or_cache_load_seconds": compile_seconds,
         "build_seconds": build_seconds,
         "bed_top_at_end_m": top,
@@ -369,6 +377,44 @@ def parse_liggghts(output: str, ranks: int) -> dict:
     }
 
 
+def _descendants_named(root_pid: int, name: str) -> list:
+    """Pids of the processes called `name` below `root_pid` (Linux /proc)."""
+    children = {}
+    names = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as handle:
+                text = handle.read()
+        except OSError:
+            continue
+        names[int(entry)] = text[text.index("(") + 1:text.rindex(")")]
+        parent = int(text[text.rindex(")") + 2:].split()[1])
+        children.setdefault(parent, []).append(int(entry))
+    found, stack = [], [root_pid]
+    while stack:
+        for child in children.get(stack.pop(), []):
+            if names.get(child) == name:
+                found.append(child)
+            stack.append(child)
+    return found
+
+
+def _cpu_seconds_of(pids: list) -> float:
+    """User + system CPU seconds of running processes (10 ms resolution)."""
+    ticks = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as handle:
+                fields = handle.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / ticks
+    return total
+
+
 def run_liggghts(args) -> dict:
     executable = shutil.which("liggghts")
     if executable is None:
@@ -376,19 +422,40 @@ def run_liggghts(args) -> dict:
     from pdemfem.runtime import process_environment
 
     command = liggghts_command(args, executable)
+    # LIGGGHTS times its loop in wall-clock only.  Its CPU time over the timed run is
+    # read from /proc when the run's first thermo row (printed at setup, flushed by
+    # `thermo_modify flush yes`) and its "Loop time" line come through the pipe.
+    lines, setups, pids, cpu_marks = [], 0, [], []
     usage_before, wall_start = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="settle-liggghts-") as scratch:
-        completed = subprocess.run(command, cwd=scratch, env=process_environment(), capture_output=True, text=True)
+        process = subprocess.Popen(command, cwd=scratch, env=process_environment(), stdout=subprocess.PIPE,
+                                   stderr=subprocess.STDOUT, text=True, bufsize=1)
+        for line in process.stdout:
+            lines.append(line)
+            if line.startswith("Setting up run"):
+                setups += 1
+            elif setups == 2 and not cpu_marks and re.match(r"^\s*\d+\s", line):
+                pids = _descendants_named(process.pid, "liggghts")
+                cpu_marks.append(_cpu_seconds_of(pids))
+            elif setups == 2 and line.startswith("Loop time of") and len(cpu_marks) == 1:
+                cpu_marks.append(_cpu_seconds_of(pids))
+        returncode = process.wait()
     usage_after, elapsed = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter() - wall_start
     child_cpu = (usage_after.ru_utime - usage_before.ru_utime) + (usage_after.ru_stime - usage_before.ru_stime)
-    if completed.returncode != 0:
-        sys.stderr.write(completed.stdout[-3000:] + completed.stderr[-3000:])
-        raise RuntimeError(f"LIGGGHTS failed (exit {completed.returncode}): {' '.join(command)}")
-    result = parse_liggghts(completed.stdout, args.ranks)
+    output = "".join(lines)
+    if returncode != 0:
+        sys.stderr.write(output[-5000:])
+        raise RuntimeError(f"LIGGGHTS failed (exit {returncode}): {' '.join(command)}")
+    result = parse_liggghts(output, args.ranks)
     result["command"] = " ".join(command)
-    # Whole process (setup, untimed and timed steps, mpiexec): LIGGGHTS has no CPU timer of its own.
-    result["cpu_share"] = child_cpu / (elapsed * args.ranks)
-    version = re.search(r"LIGGGHTS \(Version ([^,)]+)", completed.stdout)
+    if len(cpu_marks) == 2 and pids:
+        cpu_seconds = cpu_marks[1] - cpu_marks[0]
+        result["cpu_seconds"] = cpu_seconds
+        result["cpu_share"] = cpu_seconds / (result["wall_seconds"] * args.ranks)
+        result["particle_steps_per_cpu_second"] = result["particles"] * result["steps"] / cpu_seconds
+    else:  # whole process (setup and untimed steps included)
+        result["cpu_share"] = child_cpu / (elapsed * args.ranks)
+    version = re.search(r"LIGGGHTS \(Version ([^,)]+)", output)
     result["version"] = version.group(1) if version else None
     return result
 
@@ -413,6 +480,7 @@ def print_table(results: dict) -> None:
         ("wall time [s] (best of --repeat)", "wall_seconds", None),
         ("CPU share (< 0.95: machine busy)", "cpu_share", None),
         ("particle-steps/s per core", "particle_steps_per_second_per_core", "higher"),
+        ("particle-steps per CPU-second", "particle_steps_per_cpu_second", "higher"),
         ("mean contacts (pairs + walls)", "mean_contacts", None),
         ("ns per contact (per core)", "ns_per_contact", "lower"),
     ]
@@ -434,6 +502,10 @@ def print_table(results: dict) -> None:
         total = pdem["wall_seconds"]
         for label, value in pdem["time_breakdown_seconds"].items():
             print(f"  {label:44s} {value:8.3f} s  {100 * value / total:5.1f} %")
+    if pdem.get("step_overhead_microseconds_27_particles") is not None:
+        overhead = pdem["step_overhead_microseconds_27_particles"]
+        print(f"  fixed cost per step (27-particle scene): {overhead:.1f} us = "
+              f"{100 * overhead * 1e-6 * pdem['steps'] / pdem['wall_seconds']:.1f} % of the timed steps")
     if lig.get("time_breakdown_seconds"):
         print("LIGGGHTS: where the time goes (its own timers; walls are in 'Other' or 'Modify')")
         total = lig["wall_seconds"]
@@ -518,6 +590,9 @@ def main(argv=None) -> int:
         results["ratio_pdemfem_over_liggghts"] = {
             "particle_steps_per_second_per_core":
                 pdem["particle_steps_per_second_per_core"] / lig["particle_steps_per_second_per_core"],
+            "particle_steps_per_cpu_second":
+                (pdem["particle_steps_per_cpu_second"] / lig["particle_steps_per_cpu_second"]
+                 if lig.get("particle_steps_per_cpu_second") else None),
             "ns_per_contact": (pdem["ns_per_contact"] / lig["ns_per_contact"]
                                if pdem.get("ns_per_contact") and lig.get("ns_per_contact") else None),
         }
