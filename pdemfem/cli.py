@@ -72,8 +72,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("-o", "--output", metavar="DIR", help="output directory (default: the scene's output.dir, "
                      "relative to the scene file)")
     run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    run.add_argument("--restart", metavar="FILE", help="continue from a checkpoint file")
-    run.add_argument("--force", action="store_true", help="allow writing into an existing output directory")
+    run.add_argument("--restart", metavar="FILE", help="continue from a checkpoint file (or a checkpoint "
+                     "directory: its latest.h5), on any number of ranks")
+    run.add_argument("--force", action="store_true", help="with --restart: accept a checkpoint written for a "
+                     "scene whose physics changed (scene hash mismatch), e.g. after a deliberate edit")
     run.set_defaults(handler=_command_run)
 
     check = commands.add_parser("check", help="validate a scene and print derived quantities (dt, contact duration, memory)")
@@ -96,7 +98,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the command line; returns the exit code (the console script exits with it)."""
-    arguments = build_parser().parse_args(argv)
+    parser = build_parser()
+    arguments, unknown = parser.parse_known_args(argv)
+    petsc_options, rest = split_petsc_options(unknown)
+    if rest:
+        parser.error(f"unrecognized arguments: {' '.join(rest)} (PETSc options must start with -fem_)")
+    if petsc_options:
+        if arguments.command != "run":
+            parser.error(f"PETSc options ({' '.join(name for name, _ in petsc_options)}) only apply to run")
+        _set_petsc_options(petsc_options)
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
@@ -116,6 +126,48 @@ def main(argv: Optional[List[str]] = None) -> int:
             sys.stderr.flush()
             comm.Abort(1)
         raise
+
+
+PETSC_OPTION_PREFIX = "-fem_"
+
+
+def split_petsc_options(arguments: List[str]) -> tuple:
+    """([(name, value or None)] of the -fem_* PETSc options, the other arguments).
+
+    A value is the next argument unless that is another option (a negative number is a value)."""
+    options, rest = [], []
+    index = 0
+    while index < len(arguments):
+        argument = arguments[index]
+        if argument.startswith(PETSC_OPTION_PREFIX):
+            name, _, value = argument.partition("=")
+            if not value and index + 1 < len(arguments) and not _is_option(arguments[index + 1]):
+                value = arguments[index + 1]
+                index += 1
+            options.append((name, value or None))
+        else:
+            rest.append(argument)
+        index += 1
+    return options, rest
+
+
+def _is_option(text: str) -> bool:
+    if not text.startswith("-"):
+        return False
+    try:
+        float(text)
+        return False
+    except ValueError:
+        return True
+
+
+def _set_petsc_options(options) -> None:
+    """Put -fem_* options (the FE solvers' prefixes: -fem_static_*, -fem_mass_*) into PETSc's database."""
+    from petsc4py import PETSc
+
+    database = PETSc.Options()
+    for name, value in options:
+        database.setValue(name[1:], value if value is not None else "")
 
 
 def _fail_together(comm, error: PdemfemError) -> int:

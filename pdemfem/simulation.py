@@ -6,6 +6,7 @@ and validated, so a bad scene leaves no output directory behind.
 """
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 from types import SimpleNamespace
@@ -16,7 +17,7 @@ from mpi4py import MPI
 from pdemfem.contact.tables import build_contact_tables
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
-from pdemfem.io.history import HistoryWriter
+from pdemfem.io.simulation_io import SimulationIO
 from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
@@ -29,11 +30,13 @@ from pdemfem.walls.plane import PlaneWalls
 # larger skins rebuild the list less often but carry more non-touching pairs.
 DEFAULT_SKIN_FRACTION = 0.3
 
+log = logging.getLogger("pdemfem")
+
 
 class Simulation:
     """A coupled DEM(-FEM) simulation built from a validated scene."""
 
-    def __init__(self, scene, base_dir: Path, comm=None, output_dir=None):
+    def __init__(self, scene, base_dir: Path, comm=None, output_dir=None, restart=None, force: bool = False):
         self.comm = comm if comm is not None else MPI.COMM_WORLD
         self.scene = scene
         self.base_dir = Path(base_dir)
@@ -41,22 +44,27 @@ class Simulation:
         self.dt = float(derived.time_step(scene))
         self.time = 0.0
         self.step_count = 0
-        self._history = None
         self.solids = self._build_solids()
         self.particle_system = self._build_particles()
         self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt,
                                        fem_every=scene.coupling.fem_every)
+        self.io = SimulationIO(self)
+        self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
+        if restart is not None:
+            self.io.restore(restart, force=force)
 
     # ------------------------------------------------------------ construction
     @classmethod
-    def from_file(cls, path, comm=None, output_dir=None):
+    def from_file(cls, path, comm=None, output_dir=None, restart=None, force: bool = False):
+        """Build from a scene file; `restart`: a checkpoint (or its directory) to continue from,
+        `force`: accept a checkpoint of a scene whose physics changed (scene hash mismatch)."""
         scene, base_dir = load_scene(path)
-        return cls(scene, base_dir, comm=comm, output_dir=output_dir)
+        return cls(scene, base_dir, comm=comm, output_dir=output_dir, restart=restart, force=force)
 
     @classmethod
-    def from_dict(cls, data: dict, comm=None, base_dir=None, output_dir=None):
+    def from_dict(cls, data: dict, comm=None, base_dir=None, output_dir=None, restart=None, force: bool = False):
         scene, base_dir = load_scene(data, base_dir=base_dir)
-        return cls(scene, base_dir, comm=comm, output_dir=output_dir)
+        return cls(scene, base_dir, comm=comm, output_dir=output_dir, restart=restart, force=force)
 
     def _build_particles(self) -> ParticleSystem:
         scene = self.scene
@@ -67,6 +75,7 @@ class Simulation:
         group_density = np.array([scene.materials[group.material].density for group in scene.particles])
         group_temperature = np.array([group.initial_temperature or 0.0 for group in scene.particles])
         total = len(inserted.radii)
+        self.inserted_count = total
         # Every rank places all particles identically (ids = insertion order) and keeps an
         # even slice; the first list build then moves each particle to the rank owning its box.
         mine = slice(total * self.comm.rank // self.comm.size, total * (self.comm.rank + 1) // self.comm.size)
@@ -129,47 +138,70 @@ class Simulation:
     def output_interval(self) -> float:
         return self.scene.output.every or self.scene.time.end / 100.0
 
+    def _steps_per(self, interval: float) -> int:
+        return max(1, int(round(interval / self.dt)))
+
     def run(self, progress: bool = True) -> None:
-        """Advance to time.end, writing history rows every output interval."""
+        """Advance to time.end, writing history rows and field series every output interval and
+        checkpoints every checkpoint interval.  SIGTERM/SIGUSR1 stop the run at the next stop
+        check (every STOP_CHECK_EVERY steps, all ranks at the same step) with one final
+        output step and checkpoint; `stopped_by` then names the signal."""
+        from pdemfem.io.signals import STOP_CHECK_EVERY, StopRequest
+
         end = self.scene.time.end
         total_steps = int(math.ceil(end / self.dt - 1e-9))
-        steps_per_output = max(1, int(round(self.output_interval / self.dt)))
-        self._open_outputs()
+        steps_per_output = self._steps_per(self.output_interval)
+        every = self.scene.checkpoint.every
+        steps_per_checkpoint = self._steps_per(every) if every else None
+        self.io.open()
         if self.step_count == 0:
-            self._write_history()
+            self.io.write_output()
         bar = _progress_bar(total_steps, self.step_count, progress and self.comm.rank == 0)
+        stop = StopRequest()
         try:
             while self.step_count < total_steps:
-                chunk = min(steps_per_output - self.step_count % steps_per_output, total_steps - self.step_count)
-                self.step(chunk)
-                if self.step_count % steps_per_output == 0 or self.step_count == total_steps:
-                    self._write_history()
+                step = self.step_count
+                targets = [total_steps, (step // steps_per_output + 1) * steps_per_output,
+                           (step // STOP_CHECK_EVERY + 1) * STOP_CHECK_EVERY]
+                if steps_per_checkpoint:
+                    targets.append((step // steps_per_checkpoint + 1) * steps_per_checkpoint)
+                self.step(min(targets) - step)
+                step = self.step_count
+                at_end = step == total_steps
+                if step % steps_per_output == 0 or at_end:
+                    self.io.write_output()
+                if steps_per_checkpoint and (step % steps_per_checkpoint == 0 or at_end):
+                    self.io.write_checkpoint()
                 if bar is not None:
-                    bar.update(self.step_count - bar.n)
+                    bar.update(step - bar.n)
                     bar.set_postfix_str(f"t = {self.time:.4g} / {end:.4g} s", refresh=False)
+                if not at_end and step % STOP_CHECK_EVERY == 0 and stop.should_stop(self.comm):
+                    self.stopped_by = stop.signal_name or "signal"
+                    self.io.write_output()
+                    path = self.io.write_checkpoint()
+                    if self.comm.rank == 0:
+                        log.warning("%s: stopped at step %d (t = %.6g s); continue with --restart %s",
+                                    self.stopped_by, step, self.time, path)
+                    break
         finally:
+            stop.restore()
             if bar is not None:
                 bar.close()
-            self._close_outputs()
+            self.io.close()
+
+    def write_checkpoint(self):
+        """Collective: write a checkpoint now (checkpoint.dir); returns its path."""
+        return self.io.write_checkpoint()
 
     # ------------------------------------------------------------ output
-    def _open_outputs(self) -> None:
-        if self.comm.rank == 0:
-            self.output_dir.mkdir(parents=True, exist_ok=True)
-        self.comm.Barrier()
+    def history_columns(self) -> list:
         columns = ["time", "step", "particles", "kinetic_energy", "rotational_energy", "potential_energy",
                    "elastic_energy", "dissipated_energy", "wall_work", "contacts", "lost_particles"]
         if self.solids:
             columns += ["solid_kinetic_energy", "solid_strain_energy", "solid_load_potential"]
         for name in self._surface_names():
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
-        self._history = HistoryWriter(self.output_dir / "history.csv", columns, self.comm.rank == 0,
-                                      append=self.step_count > 0)
-
-    def _close_outputs(self) -> None:
-        if self._history is not None:
-            self._history.close()
-            self._history = None
+        return columns
 
     def history_row(self) -> dict:
         system = self.particle_system
@@ -186,10 +218,6 @@ class Simulation:
     def _surface_names(self) -> list:
         """Walls, then the solids the particles can touch: each gets force_<name>_x/y/z columns."""
         return [wall.name for wall in self.scene.walls] + [surface.name for surface in self.coupled_surfaces]
-
-    def _write_history(self) -> None:
-        if self._history is not None:
-            self._history.write(self.history_row())
 
     # ------------------------------------------------------------ queries
     @property

@@ -80,7 +80,7 @@ def checkpoint_path(directory, step: int) -> Path:
 
 def _as_key(keys) -> np.ndarray:
     keys = np.ascontiguousarray(keys, dtype=np.int64)
-    return keys.reshape(len(keys), -1)
+    return keys.reshape(len(keys), int(np.prod(keys.shape[1:], dtype=np.int64)))  # (0, k) stays (0, k)
 
 
 def _lex_order(keys: np.ndarray) -> np.ndarray:

@@ -181,9 +181,27 @@ class WallConfig(StrictModel):
         return self
 
 
+ParticleOutputField = Literal["positions", "velocities", "radii", "ids", "forces", "temperature",
+                              "angular_velocities", "torques", "materials"]
+SolidOutputField = Literal["displacements", "velocities", "von_mises", "temperature"]
+
+
 class OutputConfig(StrictModel):
     dir: str = "out"
     every: Optional[PositiveFloat] = Field(None, description="output interval [s]; default end/100")
+    particles: List[ParticleOutputField] = Field(
+        default_factory=lambda: ["positions", "velocities", "radii", "ids", "forces", "temperature"],
+        description="per-particle fields written to <dir>/particles.h5 + .xdmf every interval; [] writes none")
+    solids: List[SolidOutputField] = Field(
+        default_factory=lambda: ["displacements", "velocities", "von_mises", "temperature"],
+        description="fields of each solid written to <dir>/<solid>.h5 + .xdmf every interval; [] writes none")
+
+
+class CheckpointConfig(StrictModel):
+    every: Optional[PositiveFloat] = Field(
+        None, description="checkpoint interval [s] (rounded to whole steps); none: only on SIGTERM/SIGUSR1 and at the end")
+    keep: Annotated[int, Field(ge=1)] = Field(2, description="newest checkpoints kept (older ones are deleted)")
+    dir: Optional[str] = Field(None, description="checkpoint directory; default <output dir>/checkpoints")
 
 
 class NeighborConfig(StrictModel):
@@ -233,6 +251,7 @@ class Scene(StrictModel):
     particles: List[ParticleGroupConfig] = Field(default_factory=list)
     walls: List[WallConfig] = Field(default_factory=list)
     output: OutputConfig = Field(default_factory=OutputConfig)
+    checkpoint: CheckpointConfig = Field(default_factory=CheckpointConfig)
     neighbors: NeighborConfig = Field(default_factory=NeighborConfig)
     domain: DomainConfig = Field(default_factory=DomainConfig)
     parallel: ParallelConfig = Field(default_factory=ParallelConfig)

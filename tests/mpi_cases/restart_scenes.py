@@ -1,0 +1,74 @@
+"""Scenes and state dumps shared by tests/test_restart*.py, tests/test_output_scene*.py and the
+restart MPI cases."""
+from __future__ import annotations
+
+import numpy as np
+
+DT = 4e-5
+
+
+def pile_scene(out_dir, steps: int, output_steps: int, checkpoint_steps=None, count: int = 96,
+               element: str = "P1", fem_every: int = 2, cells=(3, 3, 1)) -> dict:
+    """Grains thrown (2 m/s down, sideways) into a box of plane walls onto a clamped plate (a solid):
+    pair, plane-wall and FE-surface contacts with friction within the first ~80 steps."""
+    scene = {
+        "time": {"end": steps * DT, "dt": DT},
+        "gravity": [0.0, 0.0, -9.81],
+        "materials": {"grain": {"density": 2500.0, "youngs_modulus": 1e7, "poisson_ratio": 0.3},
+                      "plate": {"density": 2700.0, "youngs_modulus": 7e9, "poisson_ratio": 0.33}},
+        "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.3, "friction": 0.5}},
+        "particles": [
+            {"name": "lower", "material": "grain", "radius": {"min": 0.0045, "max": 0.0055},
+             "insert": {"kind": "lattice", "region": {"box": [[0.0556, 0.0556, 0.0256], [0.1444, 0.1444, 0.0368]]},
+                        "count": count // 2, "spacing": 0.0112, "jitter": 0.05, "seed": 3,
+                        "velocity": [0.6, 0.35, 1.0]}},
+            {"name": "upper", "material": "grain", "radius": {"min": 0.0045, "max": 0.0055},
+             "insert": {"kind": "lattice", "region": {"box": [[0.0556, 0.0556, 0.0369], [0.1444, 0.1444, 0.05]]},
+                        "count": count - count // 2, "spacing": 0.0112, "jitter": 0.05, "seed": 4,
+                        "velocity": [-0.5, 0.2, -2.0]}}],
+        "walls": [{"name": f"side_{k}", "kind": "plane", "point": point, "normal": normal, "material": "grain"}
+                  for k, (point, normal) in enumerate([([0.054, 0, 0], [1, 0, 0]), ([0.146, 0, 0], [-1, 0, 0]),
+                                                        ([0, 0.054, 0], [0, 1, 0]), ([0, 0.146, 0], [0, -1, 0])])],
+        "solids": [{"name": "plate", "mesh": {"box": [[0, 0, 0], [0.2, 0.2, 0.02]], "cells": list(cells)},
+                    "material": "plate", "element": element, "fixed": ["xmin", "xmax", "ymin", "ymax"],
+                    "contact": ["zmax"]}],
+        "coupling": {"fem_every": fem_every},
+        "output": {"dir": str(out_dir), "every": output_steps * DT},
+    }
+    if checkpoint_steps is not None:
+        scene["checkpoint"] = {"every": checkpoint_steps * DT, "keep": 10}
+    return scene
+
+
+def gather_state(simulation) -> dict | None:
+    """Everything compared between runs, gathered to rank 0 and sorted by particle id."""
+    comm = simulation.comm
+    system = simulation.particle_system
+    state = system.state
+    owned = state.owned_count
+    local = {"ids": state.ids[:owned], "positions": state.positions[:owned],
+             "velocities": state.velocities[:owned], "angular_velocities": state.angular_velocities[:owned],
+             "forces": state.forces[:owned], "wall_history": state.wall_history[:owned]}
+    for name, values in state.fields.items():
+        local["field:" + name] = values[:owned]
+    gathered = comm.gather(local, root=0)
+    solids = {}
+    for name, solid in simulation.solids.items():
+        rows = comm.gather((np.asarray(solid.original_node_ids), solid.displacements, solid.velocities), root=0)
+        if comm.rank == 0:
+            ids = np.concatenate([r[0] for r in rows])
+            order = np.argsort(ids)
+            solids[f"solid:{name}:u"] = np.concatenate([r[1] for r in rows])[order]
+            solids[f"solid:{name}:v"] = np.concatenate([r[2] for r in rows])[order]
+    energies = simulation.energies()
+    if comm.rank != 0:
+        return None
+    result = {}
+    for key in gathered[0]:
+        result[key] = np.concatenate([g[key] for g in gathered])
+    order = np.argsort(result["ids"])
+    result = {key: values[order] for key, values in result.items()}
+    result.update(solids)
+    result["energies"] = np.array([energies[k] for k in sorted(energies)])
+    result["scalars"] = np.array([simulation.step_count, system.lost_particles, simulation.time])
+    return result

@@ -1,0 +1,143 @@
+"""Checkpoint/restart of a running simulation (issue 7): exact continuation, other rank counts, errors.
+
+The scene (restart_scenes.pile_scene): 96 grains with friction thrown against each other, plane walls
+and a clamped FE plate (P1, fem_every = 2): pair, wall and FE-surface contacts with tangential
+history, sub-cycling accumulators pending at odd checkpoint steps.  Checkpoints every 25 steps;
+the uninterrupted run goes to step 200.  Checkpoint 25 falls amid grain-grain collisions, 175 amid
+plate and wall contacts with one step of counter-forces accumulated (fem_every = 2).
+"""
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpi_harness import run_under_mpi
+
+sys.path.insert(0, str(Path(__file__).parent / "mpi_cases"))
+
+STEPS, EVERY = 200, 25
+
+
+def checkpoint(directory: Path, step: int) -> Path:
+    return Path(directory) / "checkpoints" / f"checkpoint_{step:012d}.h5"
+
+
+def run_serial(out: Path, restart=None, force=False, steps=STEPS):
+    from mpi4py import MPI
+
+    import restart_scenes
+    from pdemfem.simulation import Simulation
+
+    scene = restart_scenes.pile_scene(out, steps, EVERY, EVERY)
+    simulation = Simulation.from_dict(scene, comm=MPI.COMM_WORLD, base_dir=out, restart=restart, force=force)
+    simulation.run(progress=False)
+    return simulation, restart_scenes.gather_state(simulation)
+
+
+def assert_identical(a, b) -> None:
+    assert sorted(a) == sorted(b)
+    for key in a:
+        assert np.array_equal(a[key], b[key]), f"{key}: max difference {np.abs(a[key] - b[key]).max()}"
+
+
+def assert_close(a, b, rtol=1e-9) -> None:
+    for key in a:
+        scale = max(float(np.abs(a[key]).max()), 1e-300) if np.size(a[key]) else 1.0
+        assert np.allclose(a[key], b[key], rtol=0, atol=rtol * scale), key
+
+
+@pytest.fixture(scope="module")
+def serial_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial")
+    simulation, state = run_serial(out)
+    return out, state
+
+
+@pytest.mark.parametrize("step", [EVERY, 175])
+def test_serial_restart_is_bit_identical(serial_run, tmp_path, step):
+    out, uninterrupted = serial_run
+    assert uninterrupted["scalars"][0] == STEPS
+    shutil.copytree(out, tmp_path / "out")
+    simulation, restarted = run_serial(tmp_path / "out", restart=checkpoint(tmp_path / "out", step))
+    assert_identical(uninterrupted, restarted)
+    # The series were continued, not restarted: all output steps present once, history rows in order.
+    history = np.genfromtxt(tmp_path / "out" / "history.csv", delimiter=",", names=True)
+    assert list(history["step"]) == list(range(0, STEPS + 1, EVERY))
+    import h5py
+
+    with h5py.File(tmp_path / "out" / "particles.h5", "r") as handle:
+        assert sorted(int(handle[k].attrs["step"]) for k in handle if k.startswith("step_")) \
+            == list(range(0, STEPS + 1, EVERY))
+
+
+def test_two_ranks_bit_identical_and_other_rank_counts(serial_run, tmp_path):
+    serial_out, serial_state = serial_run
+    out = tmp_path / "two"
+    run_under_mpi(2, "restart_case.py", out, STEPS, EVERY, tmp_path / "full.npz")
+    full = dict(np.load(tmp_path / "full.npz"))
+    run_under_mpi(2, "restart_case.py", out, STEPS, EVERY, tmp_path / "cont.npz",
+                  "--restart", checkpoint(out, 175))
+    assert_identical(full, dict(np.load(tmp_path / "cont.npz")))
+    # 2 ranks agree with 1 rank to round-off, and a checkpoint continues on another rank count.
+    assert_close(serial_state, full)
+    one = tmp_path / "one"
+    shutil.copytree(serial_out, one)
+    run_under_mpi(2, "restart_case.py", one, STEPS, EVERY, tmp_path / "1to2.npz", "--restart", checkpoint(one, EVERY))
+    assert_close(serial_state, dict(np.load(tmp_path / "1to2.npz")))
+    _, two_to_one = run_serial(out, restart=checkpoint(out, EVERY))
+    assert_close(full, two_to_one)
+
+
+def test_checkpoint_errors(serial_run, tmp_path):
+    from pdemfem.errors import CheckpointError
+
+    out, _ = serial_run
+    good = checkpoint(out, 100)
+    with pytest.raises(CheckpointError, match="not found"):
+        run_serial(tmp_path / "a", restart=tmp_path / "missing.h5")
+    truncated = tmp_path / "truncated.h5"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    with pytest.raises(CheckpointError, match="truncated|corrupt"):
+        run_serial(tmp_path / "b", restart=truncated)
+    corrupt = tmp_path / "corrupt.h5"
+    data = bytearray(good.read_bytes())
+    import h5py
+
+    with h5py.File(good, "r") as handle:  # flip a byte inside the particle positions
+        offset = handle["particles/positions"].id.get_offset()
+    data[offset + 100] ^= 0xFF
+    corrupt.write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match="checksum"):
+        run_serial(tmp_path / "c", restart=corrupt)
+    # The end time is not physics: a longer run continues without --force.
+    simulation, _ = run_serial(tmp_path / "d", restart=good, steps=STEPS + EVERY)
+    assert simulation.step_count == STEPS + EVERY
+
+
+def test_cli_scene_change_needs_force_and_errors_exit_2(serial_run, tmp_path):
+    import yaml
+
+    import restart_scenes
+
+    out, _ = serial_run
+    scene = restart_scenes.pile_scene("out", STEPS + EVERY, EVERY, EVERY)
+    scene["materials"]["grain"]["density"] = 2600.0  # physics changed
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    shutil.copytree(out, tmp_path / "out")
+    good = checkpoint(tmp_path / "out", 100)
+    command = [sys.executable, "-m", "pdemfem.cli", "run", str(path), "--quiet", "--restart", str(good)]
+    from pdemfem.runtime import process_environment
+
+    completed = subprocess.run(command, env=process_environment(), capture_output=True, text=True, cwd=tmp_path)
+    assert completed.returncode == 2, completed.stderr
+    assert "scene hash" in completed.stderr and "--force" in completed.stderr and "Traceback" not in completed.stderr
+    completed = subprocess.run(command + ["--force", "-fem_mass_ksp_rtol", "1e-9"], env=process_environment(),
+                               capture_output=True, text=True, cwd=tmp_path)
+    assert completed.returncode == 0, completed.stderr
+    assert checkpoint(tmp_path / "out", STEPS + EVERY).exists()
