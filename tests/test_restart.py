@@ -141,3 +141,21 @@ def test_cli_scene_change_needs_force_and_errors_exit_2(serial_run, tmp_path):
                                capture_output=True, text=True, cwd=tmp_path)
     assert completed.returncode == 0, completed.stderr
     assert checkpoint(tmp_path / "out", STEPS + EVERY).exists()
+
+
+def test_moving_mesh_and_cylinder_walls_restart_bit_identical(tmp_path):
+    from mpi4py import MPI
+
+    import restart_scenes
+    from pdemfem.simulation import Simulation
+
+    def run(restart=None):
+        scene = restart_scenes.add_moving_walls(restart_scenes.pile_scene(tmp_path, 150, EVERY, EVERY), tmp_path)
+        simulation = Simulation.from_dict(scene, comm=MPI.COMM_WORLD, base_dir=tmp_path, restart=restart)
+        simulation.run(progress=False)
+        return restart_scenes.gather_state(simulation)
+
+    uninterrupted = run()
+    history = np.genfromtxt(tmp_path / "history.csv", delimiter=",", names=True)
+    assert np.abs(history["force_lid_z"]).max() > 0 and np.abs(history["force_drum_x"]).max() > 0
+    assert_identical(uninterrupted, run(restart=checkpoint(tmp_path, 100)))

@@ -72,3 +72,36 @@ def gather_state(simulation) -> dict | None:
     result["energies"] = np.array([energies[k] for k in sorted(energies)])
     result["scalars"] = np.array([simulation.step_count, system.lost_particles, simulation.time])
     return result
+
+
+LID_STL = """solid lid
+facet normal 0 0 -1
+outer loop
+vertex 0.04 0.04 0.0485
+vertex 0.16 0.16 0.0485
+vertex 0.16 0.04 0.0485
+endloop
+endfacet
+facet normal 0 0 -1
+outer loop
+vertex 0.04 0.04 0.0485
+vertex 0.04 0.16 0.0485
+vertex 0.16 0.16 0.0485
+endloop
+endfacet
+endsolid lid
+"""
+
+
+def add_moving_walls(scene: dict, out_dir) -> dict:
+    """A spinning drum (cylinder) round the grains and a spinning mesh lid pressed down onto them
+    (writes lid.stl into out_dir, which must exist)."""
+    from pathlib import Path
+
+    (Path(out_dir) / "lid.stl").write_text(LID_STL)
+    scene["walls"] += [
+        {"name": "drum", "kind": "cylinder", "material": "grain", "radius": 0.0585,
+         "axis": {"point": [0.1, 0.1, 0.0], "direction": [0, 0, 1]}, "angular_velocity": [0, 0, 20.0]},
+        {"name": "lid", "kind": "mesh", "material": "grain", "file": str(Path(out_dir) / "lid.stl"),
+         "velocity": [0, 0, -2.5], "center": [0.1, 0.1, 0.0485], "angular_velocity": [0, 0, 5.0]}]
+    return scene
