@@ -18,7 +18,7 @@ def sphere_mass(radius: float, density: float) -> float:
 
 
 def ball_on_block(element="P1", dt=1e-4, fem_every=1, height=1.0, block_modulus=None, restitution=0.2,
-                  cells=(2, 2, 1), end=1.0, mass="lumped", rigid=None):
+                  cells=(2, 2, 1), end=1.0, mass="lumped", rigid=None, speed=0.0):
     """Sphere R = 0.2 m dropped from centre height `height` onto a 1 x 1 x 0.5 m block clamped at its base.
 
     rigid: None (deformable block), "mesh" (the block's top as a rigid plane wall, for the limit test)."""
@@ -31,7 +31,8 @@ def ball_on_block(element="P1", dt=1e-4, fem_every=1, height=1.0, block_modulus=
         "materials": {"ball": dict(BALL), "steel": steel},
         "interactions": {"default": {"model": "hertz_mindlin", "restitution": restitution, "friction": 0.0}},
         "particles": [{"name": "b", "material": "ball", "radius": BALL_RADIUS,
-                       "insert": {"kind": "list", "positions": [[0.5, 0.5, height]]}}],
+                       "insert": {"kind": "list", "positions": [[0.5, 0.5, height]],
+                                  "velocities": [[0.0, 0.0, -speed]]}}],
         "coupling": {"fem_every": fem_every},
     }
     if rigid == "plane":
