@@ -1,0 +1,57 @@
+"""MPI case: coupled scenes on any rank count, gathered by particle id (tests/test_coupling_parallel.py).
+
+usage: coupling_agreement.py OUT.npz CASE STEPS [ulp]
+CASE: ball (ball on block, P1) or pile (pile on plate, P2).  Writes (rank 0) particle positions and
+velocities by id, the surface force, the support reaction and the solid's surface node positions.
+"ulp" (serial) shifts particle 0 by one unit in the last place of x: the round-off growth reference.
+"""
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+import pdemfem  # noqa: F401,E402  (environment first)
+from mpi4py import MPI  # noqa: E402
+
+from coupling_scenes import ball_on_block, pile_on_plate  # noqa: E402
+from pdemfem import Simulation  # noqa: E402
+
+
+def main():
+    out, case, steps = sys.argv[1], sys.argv[2], int(sys.argv[3])
+    perturb = len(sys.argv) > 4 and sys.argv[4] == "ulp"
+    comm = MPI.COMM_WORLD
+    if case == "ball":
+        scene, name, supports = ball_on_block(height=0.701, speed=2.4, cells=(3, 3, 2)), "block", ["zmin"]
+    else:
+        scene, name, supports = pile_on_plate(element="P2", count=120, cells=(3, 3, 1)), "plate", ["xmin", "xmax"]
+    sim = Simulation.from_dict(scene, comm=comm, output_dir=str(Path(out).parent / "unused"))
+    if perturb:
+        state = sim.particle_system.state
+        row = np.nonzero(state.ids == 0)[0]
+        state.positions[row, 0] += np.spacing(state.positions[row, 0])
+    forces = []
+    for _ in range(steps):
+        sim.step()
+        forces.append(sim.wall_force(name))
+    p = sim.particles
+    ids = comm.gather(p.ids, root=0)
+    positions = comm.gather(p.positions, root=0)
+    velocities = comm.gather(p.velocities, root=0)
+    reaction = sum(sim.solid_reaction(name, group) for group in supports)
+    _, surface, _ = sim.solids[name].surface_state()  # identical on every rank
+    reference = sim.solids[name].contact_surface().reference_positions
+    # Node numbers depend on the partition: order the surface nodes by their reference position.
+    order = np.lexsort(np.round(reference, 9).T[::-1])
+    surface = (surface - reference)[order]
+    if comm.rank == 0:
+        ids = np.concatenate(ids)
+        order = np.argsort(ids)
+        np.savez(out, ids=ids[order], positions=np.concatenate(positions)[order],
+                 velocities=np.concatenate(velocities)[order], forces=np.array(forces), reaction=reaction,
+                 surface=surface, substeps=sim.coupling.fem_substeps[name])
+
+
+if __name__ == "__main__":
+    main()
