@@ -71,7 +71,7 @@ class SimulationIO:
         self._history = None
         self._particles_out = None
         self._solid_outputs = {}
-        self._solid_maps = {}
+        self._solid_layouts = {}
         self._last_output_step = None
 
     # ================================================================== outputs
@@ -96,10 +96,9 @@ class SimulationIO:
                                                  resume_step=self.resume_step)
         if output.solids:
             for name, solid in sim.solids.items():
-                points, cells, offset, nodes = _solid_output_mesh(solid, comm)
-                self._solid_maps[name] = nodes
-                self._solid_outputs[name] = SolidOutput(sim.output_dir, name, comm, points, cells, offset,
-                                                        resume_step=self.resume_step)
+                layout = self._solid_layouts[name] = _SolidOutputLayout(solid, comm)
+                self._solid_outputs[name] = SolidOutput(sim.output_dir, name, comm, layout.points, layout.cells,
+                                                        layout.node_offset, resume_step=self.resume_step)
 
     def close(self) -> None:
         if self._history is not None:
@@ -128,19 +127,19 @@ class SimulationIO:
         return {name: getattr(state, PARTICLE_SOURCES[name])[:owned] for name in self.sim.scene.output.particles}
 
     def solid_output_arrays(self, name: str) -> tuple[dict, dict]:
-        """(point data, cell data) of a solid as written: owned output vertices, owned cells."""
-        solid, nodes = self.sim.solids[name], self._solid_maps[name]
+        """(point data, cell data) of a solid as written: this rank's blocks of the output
+        vertices and cells (input order, see _SolidOutputLayout)."""
+        solid, layout = self.sim.solids[name], self._solid_layouts[name]
         wanted = self.sim.scene.output.solids
-        point_data, cell_data = {}, {}
+        nodal = {}
         if "displacements" in wanted:
-            point_data["displacements"] = solid.displacements[nodes]
+            nodal["displacements"] = solid.displacements
         if "velocities" in wanted:
-            point_data["velocities"] = solid.velocities[nodes]
+            nodal["velocities"] = solid.velocities
         if "temperature" in wanted:
-            point_data["temperature"] = solid.temperatures[nodes]
-        if "von_mises" in wanted:
-            cell_data["von_mises"] = solid.von_mises
-        return point_data, cell_data
+            nodal["temperature"] = solid.temperatures
+        cells = {"von_mises": solid.von_mises} if "von_mises" in wanted else {}
+        return layout.node_rows(nodal), layout.cell_rows(cells)
 
     # ============================================================== checkpoints
     def write_checkpoint(self) -> Path:
@@ -440,31 +439,42 @@ def _truncate_history(path: Path, step: int) -> None:
     temporary.replace(path)
 
 
-def _solid_output_mesh(solid, comm):
-    """(owned points, owned cells in the output numbering, node offset, owned node rows) of a solid.
+class _SolidOutputLayout:
+    """How a solid is written: its corner (P1) vertices and cells in the input mesh's numbering.
 
-    The output mesh is made of the tetrahedra's corner (P1) vertices: for P2 the midside
-    nodes are left out and the corners renumbered contiguously per rank (owned corners of
-    rank r follow those of ranks < r), ghost corners' numbers come by a ghost update."""
-    from petsc4py import PETSc
+    The vertices are the tetrahedra's corner nodes (all nodes for P1, the corners for P2;
+    the input numbers corners 0..n_corners-1 and midside nodes after them) and the cells
+    the input cells, both stored in input order.  Rows are redistributed to that order
+    with the id sort of checkpoint.py (one Alltoallv per field and output step), so the
+    files do not depend on the rank count: a restart on another rank count continues the
+    same series."""
 
-    from pdemfem.fem.assemble import ghosted_vector, local_values
+    def __init__(self, solid, comm):
+        from pdemfem.fem.assemble import ghosted_vector, local_values
 
-    mesh = solid.mesh
-    owned = solid.n_owned_nodes
-    cells = mesh.cells[: mesh.n_owned_cells, :4]
-    if mesh.cells.shape[1] == 4:  # P1: every node is a vertex, numbers as in PETSc
-        nodes = np.arange(owned)
-        return mesh.points[:owned], mesh.local_to_global[cells], int(mesh.node_range[0]), nodes
-    is_corner = np.zeros(mesh.n_local_nodes, dtype=bool)
-    is_corner[mesh.cells[:, :4].ravel()] = True
-    nodes = np.flatnonzero(is_corner[:owned])
-    offset = int(comm.exscan(len(nodes)) or 0) if comm.size > 1 else 0
-    numbers = ghosted_vector(comm, mesh, 1)
-    values = np.full(owned, -1.0)
-    values[nodes] = offset + np.arange(len(nodes))
-    numbers.setArray(values)
-    local = np.rint(local_values(numbers, 1)[:, 0]).astype(np.int64)
-    numbers.destroy()
-    _ = PETSc
-    return mesh.points[nodes], local[cells], offset, nodes
+        self.comm = comm
+        mesh = solid.mesh
+        owned = solid.n_owned_nodes
+        numbers = ghosted_vector(comm, mesh, 1)  # input node numbers of owned and ghost nodes
+        numbers.setArray(np.asarray(solid.original_node_ids, dtype=np.float64))
+        local_ids = np.rint(local_values(numbers, 1)[:, 0]).astype(np.int64)
+        numbers.destroy()
+        is_corner = np.zeros(mesh.n_local_nodes, dtype=bool)
+        is_corner[mesh.cells[:, :4].ravel()] = True
+        self.nodes = np.flatnonzero(is_corner[:owned])
+        self.node_keys = local_ids[self.nodes]
+        self.cell_keys = np.asarray(solid.original_cell_ids, dtype=np.int64)
+        keys, rows = ckpt.sort_rows_by_key(comm, self.node_keys, {"points": mesh.points[self.nodes]})
+        self.points = rows["points"]
+        self.node_offset = int(keys[0, 0]) if len(keys) else 0
+        _, rows = ckpt.sort_rows_by_key(comm, self.cell_keys,
+                                        {"cells": local_ids[mesh.cells[: mesh.n_owned_cells, :4]]})
+        self.cells = rows["cells"]
+
+    def node_rows(self, values: dict) -> dict:
+        """Owned-node arrays (n_owned, ...) -> this rank's block of the output vertices."""
+        picked = {name: np.asarray(array)[self.nodes] for name, array in values.items()}
+        return ckpt.sort_rows_by_key(self.comm, self.node_keys, picked)[1] if picked else {}
+
+    def cell_rows(self, values: dict) -> dict:
+        return ckpt.sort_rows_by_key(self.comm, self.cell_keys, values)[1] if values else {}
