@@ -3,7 +3,7 @@
 # pdemfem/runtime.py and reach every command through `$(RUN)`.
 PYTHON := .venv/bin/python
 RUN := $(PYTHON) -m pdemfem.launch
-DEMO_SCENE := examples/demo.yaml
+DEMO_SCENE := examples/coupled_demo.yaml
 DEMO_OUT := out/demo
 DEMO_RANKS := 2
 PYTEST_ARGS ?=
@@ -16,7 +16,7 @@ install:
 demo: install
 	@$(RUN) -n $(DEMO_RANKS) -- $(PYTHON) -m pdemfem.cli run $(DEMO_SCENE) -o $(DEMO_OUT)
 	@$(RUN) -- $(PYTHON) -m pdemfem.cli plot $(DEMO_OUT) --quiet
-	@echo "demo results: $(DEMO_OUT)/ (history.csv, plots/*.png)"
+	@echo "demo results: $(DEMO_OUT)/ (history.csv, plots/*.png, particles.xdmf and plate.xdmf for ParaView)"
 
 test: install
 	@$(RUN) -- $(PYTHON) -m pytest -q $(PYTEST_ARGS)
