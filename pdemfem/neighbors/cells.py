@@ -2,17 +2,33 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 # A grid with far more cells than particles (a sparse, spread-out scene) costs
 # memory and stencil time for nothing: grow the cells instead.
 MAXIMUM_CELLS_PER_PARTICLE = 8
 
 
+@njit(cache=True)
+def bounding_box(positions):
+    """(lower, upper) corners of the points (one pass; numpy's axis-0 min/max is strided and slow)."""
+    lower = np.full(3, np.inf)
+    upper = np.full(3, -np.inf)
+    for i in range(positions.shape[0]):
+        for axis in range(3):
+            value = positions[i, axis]
+            if value < lower[axis]:
+                lower[axis] = value
+            if value > upper[axis]:
+                upper[axis] = value
+    return lower, upper
+
+
 def cell_grid(positions: np.ndarray, cell_size: float):
     """(lower corner, cell size, cells per axis) covering all positions."""
     count = len(positions)
-    lower = positions.min(axis=0) - 1e-9 * max(cell_size, 1.0)
-    upper = positions.max(axis=0)
+    lower, upper = bounding_box(positions)
+    lower = lower - 1e-9 * max(cell_size, 1.0)
     size = float(cell_size)
     while True:
         dimensions = np.maximum(np.floor((upper - lower) / size).astype(np.int64) + 1, 1)
@@ -21,11 +37,20 @@ def cell_grid(positions: np.ndarray, cell_size: float):
         size *= 1.5
 
 
-def cell_indices(positions: np.ndarray, lower: np.ndarray, cell_size: float, dimensions: np.ndarray) -> np.ndarray:
-    """Linear cell index of each position (x fastest)."""
-    coordinates = np.floor((positions - lower) / cell_size).astype(np.int64)
-    coordinates = np.clip(coordinates, 0, dimensions - 1)
-    return coordinates[:, 0] + dimensions[0] * (coordinates[:, 1] + dimensions[1] * coordinates[:, 2])
+@njit(cache=True)
+def cell_indices(positions, lower, cell_size, dimensions):
+    """Linear cell index of each position (x fastest), clamped into the grid."""
+    cells = np.empty(positions.shape[0], dtype=np.int64)
+    for i in range(positions.shape[0]):
+        index = 0
+        stride = 1
+        for axis in range(3):
+            coordinate = int(np.floor((positions[i, axis] - lower[axis]) / cell_size))
+            coordinate = min(max(coordinate, 0), dimensions[axis] - 1)
+            index += stride * coordinate
+            stride *= dimensions[axis]
+        cells[i] = index
+    return cells
 
 
 def cell_starts(sorted_cells: np.ndarray, cell_count: int) -> np.ndarray:

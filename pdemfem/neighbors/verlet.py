@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
+from pdemfem.neighbors.history import RECORD_WIDTH, collect_records, restore_records  # noqa: F401
 
 # The 13 "forward" neighbour cells: each unordered pair of distinct cells is visited once.
 _FORWARD_OFFSETS = np.array(
@@ -25,7 +26,6 @@ _FORWARD_OFFSETS = np.array(
      if dz > 0 or (dz == 0 and dy > 0) or (dz == 0 and dy == 0 and dx > 0)],
     dtype=np.int64,
 )
-RECORD_WIDTH = 5  # owner id, partner id, xi (3)
 
 
 @njit(cache=True)
@@ -127,41 +127,8 @@ class VerletList:
 
     def contact_records(self, ids: np.ndarray, owned_count: int) -> np.ndarray:
         """History of the springs in use, one row per owned particle in contact (see module doc)."""
-        if self.pair_count == 0:
-            return np.zeros((0, RECORD_WIDTH))
-        first, second = self.pair_rows()
-        active = np.any(self.history != 0.0, axis=1)
-        first, second, history = first[active], second[active], self.history[active]
-        from_first = first < owned_count
-        from_second = second < owned_count
-        records = np.empty((int(from_first.sum() + from_second.sum()), RECORD_WIDTH))
-        split = int(from_first.sum())
-        records[:split, 0] = ids[first[from_first]]
-        records[:split, 1] = ids[second[from_first]]
-        records[:split, 2:] = history[from_first]
-        # xi is the first particle's displacement relative to the second: it flips with the orientation.
-        records[split:, 0] = ids[second[from_second]]
-        records[split:, 1] = ids[first[from_second]]
-        records[split:, 2:] = -history[from_second]
-        return records
+        return collect_records(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count)
 
     def _restore(self, ids, owned_count, records):
-        if len(records) == 0 or self.pair_count == 0:
-            return
-        record_keys = _pair_keys(records[:, 0].astype(np.int64), records[:, 1].astype(np.int64))
-        order = np.argsort(record_keys)
-        record_keys = record_keys[order]
-        first, second = self.pair_rows()
-        first_owned = first < owned_count
-        owner = np.where(first_owned, first, second)
-        partner = np.where(first_owned, second, first)
-        keys = _pair_keys(ids[owner], ids[partner])
-        position = np.minimum(np.searchsorted(record_keys, keys), len(record_keys) - 1)
-        found = record_keys[position] == keys
-        sign = np.where(first_owned, 1.0, -1.0)
-        self.history[found] = records[order[position[found]], 2:] * sign[found, None]
-
-
-def _pair_keys(owner_ids, partner_ids):
-    # Global ids stay below 2^31 (documented limit), so the key is unique.
-    return owner_ids.astype(np.int64) * np.int64(2**31) + partner_ids.astype(np.int64)
+        restore_records(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count,
+                        np.ascontiguousarray(records))

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
 class PlaneWalls:
@@ -44,13 +45,33 @@ class PlaneWalls:
             self.candidate_particles = np.zeros(0, dtype=np.int64)
             self.candidate_walls = np.zeros(0, dtype=np.int64)
             return
-        distances = np.einsum("pk,wk->pw", positions, self.normals) - np.sum(self.points * self.normals, axis=1)
-        near = distances < (radii + skin)[:, None]
-        self.candidate_particles, self.candidate_walls = (np.ascontiguousarray(a, dtype=np.int64)
-                                                          for a in np.nonzero(near))
+        self.candidate_particles, self.candidate_walls = _near_walls(positions, radii, skin, self.points,
+                                                                     self.normals)
 
     def index(self, name: str) -> int:
         try:
             return self.names.index(name)
         except ValueError:
             raise KeyError(f"no wall named '{name}' (walls: {self.names})") from None
+
+
+@njit(cache=True)
+def _near_walls(positions, radii, skin, points, normals):
+    """(particle, wall) pairs closer than radius + skin, particle-major (the force summation order)."""
+    wall_count = points.shape[0]
+    offsets = np.empty(wall_count)
+    for w in range(wall_count):
+        offsets[w] = points[w, 0] * normals[w, 0] + points[w, 1] * normals[w, 1] + points[w, 2] * normals[w, 2]
+    particles = np.empty(positions.shape[0] * wall_count, dtype=np.int64)
+    walls = np.empty(positions.shape[0] * wall_count, dtype=np.int64)
+    count = 0
+    for i in range(positions.shape[0]):
+        reach = radii[i] + skin
+        for w in range(wall_count):
+            distance = (positions[i, 0] * normals[w, 0] + positions[i, 1] * normals[w, 1]
+                        + positions[i, 2] * normals[w, 2] - offsets[w])
+            if distance < reach:
+                particles[count] = i
+                walls[count] = w
+                count += 1
+    return particles[:count].copy(), walls[:count].copy()
