@@ -1,14 +1,18 @@
 """Benchmark of one solid: assembly, static solve, MatMult versus one explicit step.
 
-    python -m pdemfem.launch -n 2 -- .venv/bin/python -m pdemfem.fem.bench --cells 40 40 40
+    .venv/bin/python benchmarks/fem_step.py --cells 40 40 40
+    .venv/bin/python -m pdemfem.launch -n 2 -- .venv/bin/python benchmarks/fem_step.py
 
-Prints a table (rank 0).  A box of 40^3 hexahedra (6 tetrahedra each) is ~207k DOF with P1.
+Prints a table (rank 0) and writes JSON (--json, default benchmarks/results/fem_step_<ranks>.json).
+A box of 40^3 hexahedra (6 tetrahedra each) is ~207k DOF with P1.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import resource
 import time
+from pathlib import Path
 
 
 
@@ -24,6 +28,7 @@ def main(argv=None):
     parser.add_argument("--element", default="P1")
     parser.add_argument("--mass", default="lumped")
     parser.add_argument("--steps", type=int, default=200)
+    parser.add_argument("--json", default=None, help="result file (default benchmarks/results/fem_step_<ranks>.json)")
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
 
@@ -82,6 +87,15 @@ def main(argv=None):
         width = max(len(name) for name, _ in rows)
         for name, value in rows:
             print(f"{name:<{width}}  {value}")
+        results = {"ranks": comm.size, "element": args.element, "mass": args.mass, "dofs": dofs,
+                   "cells": int(solid.mesh.n_global_cells), "setup_seconds": setup, "static_seconds": static,
+                   "static_iterations": int(result.iterations), "matmult_seconds": matmult, "step_seconds": step,
+                   "step_over_matmult": step / matmult, "step_ns_per_dof": 1e9 * step / dofs,
+                   "critical_step": dt, "matrix_megabytes": matrix_mb, "peak_rss_megabytes": peak_mb}
+        path = Path(args.json or Path(__file__).parent / "results" / f"fem_step_{comm.size}.json")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(results, indent=2))
+        print(f"wrote {path}")
     return 0
 
 
