@@ -7,11 +7,22 @@ from __future__ import annotations
 
 from typing import Annotated, Tuple
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 NonNegativeFloat = Annotated[float, Field(ge=0)]
 Vector3 = Tuple[float, float, float]
+
+
+def _ordered_box(box):
+    low, high = box
+    if any(h <= l for l, h in zip(low, high)):
+        raise ValueError("box must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] with every max > min")
+    return box
+
+
+# An axis-aligned box [[xmin, ymin, zmin], [xmax, ymax, zmax]].
+Box = Annotated[Tuple[Vector3, Vector3], AfterValidator(_ordered_box)]
 
 
 class StrictModel(BaseModel):

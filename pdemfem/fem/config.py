@@ -9,7 +9,7 @@ from typing import Annotated, List, Literal, Optional, Tuple, Union
 
 from pydantic import Field, field_validator, model_validator
 
-from pdemfem.config_types import NonNegativeFloat, PositiveFloat, StrictModel, Vector3
+from pdemfem.config_types import Box, NonNegativeFloat, PositiveFloat, StrictModel, Vector3
 
 BOX_FACES = ("xmin", "xmax", "ymin", "ymax", "zmin", "zmax")
 
@@ -22,16 +22,8 @@ CellCount = Annotated[int, Field(gt=0)]
 class BoxMeshConfig(StrictModel):
     """A box [[x0,y0,z0],[x1,y1,z1]] split into nx*ny*nz hexahedra of 6 tetrahedra each (gmsh)."""
 
-    box: Tuple[Vector3, Vector3]
+    box: Box
     cells: Tuple[CellCount, CellCount, CellCount]
-
-    @field_validator("box")
-    @classmethod
-    def _ordered(cls, box):
-        low, high = box
-        if any(h <= l for l, h in zip(low, high)):
-            raise ValueError("box must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] with every max > min")
-        return box
 
 
 class DampingConfig(StrictModel):

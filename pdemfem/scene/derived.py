@@ -469,8 +469,11 @@ def warnings(scene: Scene) -> List[str]:
             "(cost ~ (r + skin)^3) for fewer rebuilds; 0.1-0.5 radius is usual"
         )
     up = _up(scene)
-    if up is not None and not any(_may_catch(wall, up) for wall in scene.walls):
-        found.append("gravity is on but no wall faces upwards: the particles fall freely")
+    # A solid with contact surfaces may catch the particles too (its surface orientation is only known
+    # once the mesh is read, so any contact solid counts).
+    catching_solid = any(solid.contact for solid in scene.solids)
+    if up is not None and not catching_solid and not any(_may_catch(wall, up) for wall in scene.walls):
+        found.append("gravity is on but no wall or contact solid faces upwards: the particles fall freely")
     meshes = [wall.name for wall in scene.walls if getattr(wall, "kind", "plane") == "mesh"]
     if meshes and scene.time.expected_impact_speed is None:
         found.append(

@@ -11,7 +11,7 @@ from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
 from pydantic import Field, field_validator, model_validator
 
-from pdemfem.config_types import NonNegativeFloat, PositiveFloat, StrictModel, Vector3  # noqa: F401 (re-exported)
+from pdemfem.config_types import Box, NonNegativeFloat, PositiveFloat, StrictModel, Vector3  # noqa: F401 (re-exported)
 from pdemfem.fem.config import SolidConfig
 
 
@@ -60,15 +60,7 @@ class RadiusRange(StrictModel):
 
 
 class BoxRegion(StrictModel):
-    box: Tuple[Vector3, Vector3]
-
-    @field_validator("box")
-    @classmethod
-    def _ordered(cls, box):
-        low, high = box
-        if any(h <= l for l, h in zip(low, high)):
-            raise ValueError("box must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] with every max > min")
-        return box
+    box: Box
 
 
 class InsertConfig(StrictModel):
@@ -211,7 +203,7 @@ class NeighborConfig(StrictModel):
 
 
 class DomainConfig(StrictModel):
-    box: Optional[Tuple[Vector3, Vector3]] = Field(
+    box: Optional[Box] = Field(
         None, description="simulation domain [[xmin,ymin,zmin],[xmax,ymax,zmax]]; particles leaving it are removed "
                           "and counted (lost_particles); needed for periodic axes")
     periodic: List[Literal["x", "y", "z"]] = Field(default_factory=list, description="periodic axes, e.g. [x]")
@@ -220,8 +212,6 @@ class DomainConfig(StrictModel):
     def _box_for_periodic(self):
         if self.periodic and self.box is None:
             raise ValueError("periodic axes need box: [[xmin,ymin,zmin],[xmax,ymax,zmax]] to set the period")
-        if self.box is not None and any(h <= l for l, h in zip(*self.box)):
-            raise ValueError("box must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] with every max > min")
         return self
 
 
