@@ -1,6 +1,7 @@
 """The `pdemfem` command.
 
-    pdemfem run scene.yaml [-o DIR] [--quiet] [--restart FILE] [--force]
+    pdemfem run scene.yaml [-o DIR] [--quiet] [--restart FILE] [--force] [-fem_<option> [value] ...]
+        (-fem_* arguments go to PETSc's options database: the FE solvers' prefixes fem_ and fem_mass_)
     pdemfem check scene.yaml [--strict]
     pdemfem info
     pdemfem plot OUTDIR [--quiet]
