@@ -92,6 +92,10 @@ class ParticleSystem:
         kick(owned, state.velocities, state.angular_velocities, state.forces, state.torques, state.inverse_mass,
              state.inverse_inertia, self.gravity, 0.5 * dt)
         largest_displacement_squared = drift(owned, state.positions, state.velocities, dt, state.positions_at_build)
+        if not np.isfinite(np.sum(state.positions[:owned])):
+            # drift's max skips NaN: rebuild now, so the blown-up particle is removed before it
+            # poisons its partners' and the walls' forces (a NaN distance passes the kernels' tests).
+            largest_displacement_squared = np.inf
         if self.comm.size > 1:
             largest_displacement_squared = self.comm.allreduce(largest_displacement_squared, op=MPI.MAX)
         self.walls.move(dt)
@@ -143,7 +147,11 @@ class ParticleSystem:
         costs = self._particle_costs() if self.comm.size > 1 else np.ones(state.owned_count)
         state.drop_ghosts()
         self._wrap_periodic()
-        costs = costs[self._remove_lost()]
+        kept = self._remove_lost()
+        costs = costs[kept]
+        if not np.all(kept) and len(records):
+            # Removed particles' records have no owner left (migrate looks owners up by id).
+            records = records[np.isin(records[:, 0].astype(np.int64), state.ids[:state.owned_count])]
         if self.comm.size > 1 or self.decomposition is None or np.any(self.periodic_lengths > 0):
             if (not canonical or self.decomposition is None) and (
                     force_rebalance or self.decomposition is None or self._imbalance(costs) > self.rebalance_threshold):
