@@ -198,21 +198,23 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             radius_sum = radius_i + radii[j]
             if distance_squared >= radius_sum * radius_sum:
                 xi_squared = pair_history[row, 0] ** 2 + pair_history[row, 1] ** 2 + pair_history[row, 2] ** 2
-                if xi_squared > 0.0 and booked:
-                    # The contact opened this step: its spring energy (booked as elastic) is lost.
-                    ex = dx - dt * (velocities[i, 0] - velocities[j, 0])
-                    ey = dy - dt * (velocities[i, 1] - velocities[j, 1])
-                    ez = dz - dt * (velocities[i, 2] - velocities[j, 2])
-                    material_j = material_index[j]
-                    dissipated_total += released_spring_energy(
-                        model_code[material_i, material_j], radius_sum - math.sqrt(ex * ex + ey * ey + ez * ez),
-                        xi_squared, mass[i] * mass[j] / (mass[i] + mass[j]), radius_i * radii[j] / radius_sum,
-                        effective_modulus[material_i, material_j], effective_shear_modulus[material_i, material_j],
-                        normal_stiffness[material_i, material_j], tangential_ratio[material_i, material_j],
-                        characteristic_speed)
-                pair_history[row, 0] = 0.0
-                pair_history[row, 1] = 0.0
-                pair_history[row, 2] = 0.0
+                if xi_squared > 0.0:
+                    if booked:
+                        # The contact opened this step: its spring energy (booked as elastic) is lost.
+                        ex = dx - dt * (velocities[i, 0] - velocities[j, 0])
+                        ey = dy - dt * (velocities[i, 1] - velocities[j, 1])
+                        ez = dz - dt * (velocities[i, 2] - velocities[j, 2])
+                        material_j = material_index[j]
+                        dissipated_total += released_spring_energy(
+                            model_code[material_i, material_j], radius_sum - math.sqrt(ex * ex + ey * ey + ez * ez),
+                            xi_squared, mass[i] * mass[j] / (mass[i] + mass[j]), radius_i * radii[j] / radius_sum,
+                            effective_modulus[material_i, material_j], effective_shear_modulus[material_i, material_j],
+                            normal_stiffness[material_i, material_j], tangential_ratio[material_i, material_j],
+                            characteristic_speed)
+                    # Only springs in use are reset: most listed pairs are apart and already zero.
+                    pair_history[row, 0] = 0.0
+                    pair_history[row, 1] = 0.0
+                    pair_history[row, 2] = 0.0
                 continue
             distance = math.sqrt(distance_squared)
             overlap = radius_sum - distance
