@@ -1,0 +1,314 @@
+"""Strong and weak scaling of the MPI-parallel DEM on the settle scene (issue 6, docs/parallel.md).
+
+    python benchmarks/scaling.py --mode strong --particles 200000 --ranks 1 2
+    python benchmarks/scaling.py --mode weak --per-rank 50000 --ranks 1 2 4
+    python benchmarks/scaling.py --mode both --particles 20000 --per-rank 10000 --ranks 1 2 --steps 200
+
+The scene is benchmarks/settle.py's (glass spheres d = 2 mm, E = 5 MPa, mu = 0.5, e = 0.5,
+dt = 2e-5 s, skin 0.3 r, settling in a five-wall box) on a compact lattice (spacing 2.04 mm,
+see scene_dict) so that the timed steps have contacts; strong scaling keeps the particle count fixed, weak scaling grows it
+with the rank count (the footprint grows, the fill height stays).  For every rank count
+the driver launches this file under mpiexec (pdemfem.launch); each run compiles on a tiny
+copy, builds the scene, takes --pre-steps untimed steps and times --steps steps.
+
+Figures per run:
+  particle-steps/s      particles * steps / wall seconds of the timed steps
+  efficiency            strong: T(1) / (p T(p)); weak: T(1) / T(p) (throughput per rank vs 1 rank)
+  communication share   time in GhostExchange.update + migrate + the MPI reductions of the step
+                        (allreduce/Allreduce/Allgather, including the waiting in them for slower
+                        ranks) over the timed wall time, max over ranks; measured by wrapping those
+                        calls in this benchmark only (no timers in the solver)
+  imbalance             max/mean over ranks of owned particles, and of the time outside
+                        communication (compute), at the end
+JSON and a PNG go to benchmarks/results/scaling.{json,png} (or --json PATH).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPOSITORY = HERE.parent
+sys.path.insert(0, str(HERE))
+import settle  # noqa: E402  (the settle benchmark's materials, walls and step)
+
+DEFAULT_JSON = HERE / "results" / "scaling.json"
+WORKER_FLAG = "--worker-json"
+COMPACT_SPACING = 2.04e-3   # lattice spacing: gaps of 0.04 mm, below the 0.3 mm skin
+
+
+def scene_dict(particles: int, spacing: float = COMPACT_SPACING) -> dict:
+    """benchmarks/settle.py's scene on a compact lattice: every particle has listed neighbours from
+    the first step and the bed compacts under gravity while it is timed (settle.py's 2.4 mm
+    lattice spends its first ~1000 steps in free fall with an empty neighbour list).  The
+    footprint grows as sqrt(particles) (25 x 25 sites at 28,000 particles), the height follows."""
+    import math
+
+    sites = max(1, round(settle.REFERENCE_SITES_PER_SIDE * math.sqrt(particles / settle.REFERENCE_PARTICLES)))
+    layers = math.ceil(particles / (sites * sites))
+    side = sites * spacing
+    height = (layers + 2) * spacing
+    scene = settle.scene_dict(particles)
+    low = (spacing - settle.DIAMETER) / 2
+    scene["particles"][0]["insert"].update({"region": {"box": [[low, low, low], [side, side, height]]},
+                                            "spacing": spacing})
+    for wall in scene["walls"]:
+        for axis, name in ((0, "x_high"), (1, "y_high")):
+            if wall["name"] == name:
+                wall["point"][axis] = side
+    return scene
+TIMED_COLLECTIVES = ("allreduce", "Allreduce", "Allgather", "allgather", "Alltoall", "Alltoallv", "Barrier")
+
+
+class _CommTimer:
+    """Accumulates wall time per label; a nested timed call inside a timed call is not counted twice."""
+
+    def __init__(self):
+        self.seconds = {}
+        self.calls = {}
+        self._depth = 0
+
+    def timed(self, label, function):
+        def wrapper(*args, **kwargs):
+            if self._depth:
+                return function(*args, **kwargs)
+            self._depth += 1
+            start = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                self._depth -= 1
+                self.seconds[label] = self.seconds.get(label, 0.0) + time.perf_counter() - start
+                self.calls[label] = self.calls.get(label, 0) + 1
+        return wrapper
+
+    def reset(self):
+        self.seconds.clear()
+        self.calls.clear()
+
+
+class _TimedComm:
+    """A communicator proxy whose collectives are timed (everything else is delegated)."""
+
+    def __init__(self, comm, timer):
+        self._comm = comm
+        for name in TIMED_COLLECTIVES:
+            setattr(self, name, timer.timed("reductions", getattr(comm, name)))
+
+    def __getattr__(self, name):
+        return getattr(self._comm, name)
+
+
+def instrument(sim, timer):
+    """Wrap ghost update, migration, rebuild and the particle system's collectives."""
+    import pdemfem.parallel.exchange as exchange_module
+    import pdemfem.particles.system as system_module
+
+    system = sim.particle_system
+    system_module.migrate = timer.timed("migration", exchange_module.migrate)
+    original_update = exchange_module.GhostExchange.update
+    exchange_module.GhostExchange.update = timer.timed("ghost update", original_update)
+    # The rebuild as a whole (sort, migration, ghost planning, list) is reported separately;
+    # its communication parts are counted under their own labels, so it is timed beside them.
+    original_rebuild = system._rebuild
+
+    def rebuild(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return original_rebuild(*args, **kwargs)
+        finally:
+            timer.rebuild_seconds = getattr(timer, "rebuild_seconds", 0.0) + time.perf_counter() - start
+            timer.rebuilds = getattr(timer, "rebuilds", 0) + 1
+    system._rebuild = rebuild
+    system.comm = _TimedComm(system.comm, timer)
+    if system.ghosts is not None:
+        system.ghosts.comm = system.comm
+
+
+def worker(args) -> dict:
+    import numpy as np
+    from mpi4py import MPI
+
+    from pdemfem import Simulation
+
+    comm = MPI.COMM_WORLD
+    ranks = comm.size
+    with tempfile.TemporaryDirectory(prefix="scaling-bench-") as scratch:
+        tiny = Simulation.from_dict(scene_dict(27 * ranks), comm=comm, output_dir=os.path.join(scratch, "tiny"))
+        tiny.step(3)
+        del tiny
+        build_start = time.perf_counter()
+        sim = Simulation.from_dict(scene_dict(args.particles), comm=comm, output_dir=os.path.join(scratch, "out"))
+        build_seconds = comm.allreduce(time.perf_counter() - build_start, op=MPI.MAX)
+        particles = sim.particle_count()
+        sim.step(args.pre_steps)
+        timer = _CommTimer()
+        instrument(sim, timer)
+        comm.Barrier()
+        timer.reset()
+        timer.rebuild_seconds, timer.rebuilds = 0.0, 0
+        start = time.perf_counter()
+        sim.step(args.steps)
+        elapsed = time.perf_counter() - start
+        comm.Barrier()  # not timed: the step's own reductions already synchronise the ranks
+        system = sim.particle_system
+        local = {
+            "comm": sum(timer.seconds.values()),
+            "ghost": timer.seconds.get("ghost update", 0.0),
+            "migration": timer.seconds.get("migration", 0.0),
+            "reductions": timer.seconds.get("reductions", 0.0),
+            "rebuild": timer.rebuild_seconds,
+            "owned": float(system.state.owned_count),
+            "ghosts": float(system.state.ghost_count),
+            "elapsed": elapsed,
+        }
+        contacts = sim.contact_count()
+        rebuilds = timer.rebuilds
+        rebalances = system.rebalances
+    gathered = comm.gather(local, root=0)
+    if comm.rank != 0:
+        return {}
+    wall = max(item["elapsed"] for item in gathered)
+    compute = np.array([item["elapsed"] - item["comm"] for item in gathered])
+    owned = np.array([item["owned"] for item in gathered])
+    return {
+        "ranks": ranks,
+        "particles": particles,
+        "steps": args.steps,
+        "pre_steps": args.pre_steps,
+        "wall_seconds": wall,
+        "particle_steps_per_second": particles * args.steps / wall,
+        "communication_share": max(item["comm"] for item in gathered) / wall,
+        "communication_seconds_by_part_max": {key: max(item[key] for item in gathered)
+                                              for key in ("ghost", "migration", "reductions")},
+        "rebuild_seconds_max": max(item["rebuild"] for item in gathered),
+        "rebuilds": rebuilds,
+        "rebalances": rebalances,
+        "imbalance_particles": float(owned.max() / owned.mean()),
+        "imbalance_compute": float(compute.max() / compute.mean()),
+        "ghosts_per_owned": float(sum(item["ghosts"] for item in gathered) / owned.sum()),
+        "contacts_at_end": contacts,
+        "build_seconds": build_seconds,
+    }
+
+
+def launch(ranks: int, particles: int, args) -> dict:
+    with tempfile.TemporaryDirectory(prefix="scaling-run-") as scratch:
+        part = os.path.join(scratch, "run.json")
+        if args.launcher:  # e.g. "srun --cpu-bind=cores" on a cluster (jobs/)
+            prefix = [*shlex.split(args.launcher), "-n", str(ranks)]
+        else:
+            prefix = [sys.executable, "-m", "pdemfem.launch", "-n", str(ranks), "--"]
+        command = [*prefix, sys.executable, str(Path(__file__).resolve()), WORKER_FLAG, part,
+                   "--particles", str(particles), "--steps", str(args.steps), "--pre-steps", str(args.pre_steps)]
+        subprocess.run(command, check=True, cwd=REPOSITORY)
+        with open(part) as handle:
+            return json.load(handle)
+
+
+def study(mode: str, args) -> list:
+    rows = []
+    for ranks in args.ranks:
+        particles = args.particles if mode == "strong" else args.per_rank * ranks
+        print(f"[{mode}] {ranks} rank(s), {particles} particles ...", flush=True)
+        row = launch(ranks, particles, args)
+        rows.append(row)
+    base = rows[0]
+    for row in rows:
+        base_per_rank = base["particle_steps_per_second"] / base["ranks"]
+        row["efficiency"] = row["particle_steps_per_second"] / row["ranks"] / base_per_rank
+    return rows
+
+
+def print_table(mode: str, rows: list) -> None:
+    print(f"\n{mode} scaling ({rows[0]['steps']} timed steps after {rows[0]['pre_steps']})")
+    print(f"{'ranks':>5} {'particles':>10} {'wall s':>8} {'p-steps/s':>11} {'effic.':>7} {'comm %':>7} "
+          f"{'ghost/migr/red s':>18} {'rebuild s':>9} {'imb. N':>6} {'imb. t':>6} {'ghost/own':>9}")
+    for row in rows:
+        parts = row["communication_seconds_by_part_max"]
+        print(f"{row['ranks']:>5} {row['particles']:>10} {row['wall_seconds']:>8.2f} "
+              f"{row['particle_steps_per_second']:>11.3g} {100 * row['efficiency']:>6.1f}% "
+              f"{100 * row['communication_share']:>6.1f}% "
+              f"{parts['ghost']:>5.2f}/{parts['migration']:>5.2f}/{parts['reductions']:>5.2f} "
+              f"{row['rebuild_seconds_max']:>9.2f} {row['imbalance_particles']:>6.3f} "
+              f"{row['imbalance_compute']:>6.3f} {row['ghosts_per_owned']:>9.3f}")
+
+
+def plot(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    studies = [mode for mode in ("strong", "weak") if mode in results]
+    figure, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for mode in studies:
+        rows = results[mode]
+        ranks = [row["ranks"] for row in rows]
+        axes[0].plot(ranks, [row["particle_steps_per_second"] for row in rows], "o-", label=f"{mode}")
+        base = rows[0]["particle_steps_per_second"] / rows[0]["ranks"]
+        axes[0].plot(ranks, [base * r for r in ranks], ":", color="grey")
+        axes[1].plot(ranks, [100 * row["efficiency"] for row in rows], "o-", label=f"{mode} efficiency")
+        axes[1].plot(ranks, [100 * row["communication_share"] for row in rows], "s--", label=f"{mode} comm. share")
+    axes[0].set_xlabel("ranks")
+    axes[0].set_ylabel("particle-steps / s")
+    axes[0].set_title("throughput (dotted: ideal)")
+    axes[0].legend()
+    axes[1].set_xlabel("ranks")
+    axes[1].set_ylabel("%")
+    axes[1].set_ylim(0, 110)
+    axes[1].set_title("parallel efficiency, communication share")
+    axes[1].legend()
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+
+
+def parse_arguments(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--mode", choices=("strong", "weak", "both"), default="both")
+    parser.add_argument("--particles", type=int, default=200000, help="strong scaling: total particles")
+    parser.add_argument("--per-rank", type=int, default=50000, help="weak scaling: particles per rank")
+    parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--steps", type=int, default=300, help="timed steps")
+    parser.add_argument("--pre-steps", type=int, default=20, help="untimed steps after the build")
+    parser.add_argument("--json", type=Path, default=DEFAULT_JSON)
+    parser.add_argument("--launcher", help="MPI launcher prefix, given '-n RANKS' (default: python -m "
+                        "pdemfem.launch, i.e. mpiexec with pdemfem's environment); e.g. 'srun --cpu-bind=cores'")
+    parser.add_argument(WORKER_FLAG, dest="worker_json", help=argparse.SUPPRESS)
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_arguments(argv)
+    if args.worker_json:
+        result = worker(args)
+        if result:
+            with open(args.worker_json, "w") as handle:
+                json.dump(result, handle)
+        return 0
+    results = {"benchmark": "scaling", "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+               "machine": {"platform": platform.platform(), "cpus_available": len(os.sched_getaffinity(0)),
+                           "load_average_1min_at_start": os.getloadavg()[0]},
+               "scene": "benchmarks/settle.py scene_dict", "steps": args.steps, "pre_steps": args.pre_steps}
+    for mode in (("strong", "weak") if args.mode == "both" else (args.mode,)):
+        results[mode] = study(mode, args)
+        print_table(mode, results[mode])
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    with open(args.json, "w") as handle:
+        json.dump(results, handle, indent=1)
+    png = args.json.with_suffix(".png")
+    plot(results, png)
+    print(f"\nwrote {args.json} and {png}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
