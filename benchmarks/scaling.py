@@ -6,8 +6,9 @@
 
 The scene is benchmarks/settle.py's (glass spheres d = 2 mm, E = 5 MPa, mu = 0.5, e = 0.5,
 dt = 2e-5 s, skin 0.3 r, settling in a five-wall box) on a compact lattice (spacing 2.04 mm,
-see scene_dict) so that the timed steps have contacts; strong scaling keeps the particle count fixed, weak scaling grows it
-with the rank count (the footprint grows, the fill height stays).  For every rank count
+see scene_dict; --spacing 2.4e-3 gives settle.py's own lattice) so that the timed steps have
+contacts; strong scaling keeps the particle count fixed, weak scaling grows it with the rank
+count (the footprint grows, the fill height stays).  For every rank count
 the driver launches this file under mpiexec (pdemfem.launch); each run compiles on a tiny
 copy, builds the scene, takes --pre-steps untimed steps and times --steps steps.
 
@@ -146,7 +147,8 @@ def worker(args) -> dict:
         tiny.step(3)
         del tiny
         build_start = time.perf_counter()
-        sim = Simulation.from_dict(scene_dict(args.particles), comm=comm, output_dir=os.path.join(scratch, "out"))
+        sim = Simulation.from_dict(scene_dict(args.particles, args.spacing), comm=comm,
+                                   output_dir=os.path.join(scratch, "out"))
         build_seconds = comm.allreduce(time.perf_counter() - build_start, op=MPI.MAX)
         particles = sim.particle_count()
         sim.step(args.pre_steps)
@@ -208,7 +210,8 @@ def launch(ranks: int, particles: int, args) -> dict:
         else:
             prefix = [sys.executable, "-m", "pdemfem.launch", "-n", str(ranks), "--"]
         command = [*prefix, sys.executable, str(Path(__file__).resolve()), WORKER_FLAG, part,
-                   "--particles", str(particles), "--steps", str(args.steps), "--pre-steps", str(args.pre_steps)]
+                   "--particles", str(particles), "--steps", str(args.steps), "--pre-steps", str(args.pre_steps),
+                    "--spacing", repr(args.spacing)]
         subprocess.run(command, check=True, cwd=REPOSITORY)
         with open(part) as handle:
             return json.load(handle)
@@ -279,6 +282,9 @@ def parse_arguments(argv=None):
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--steps", type=int, default=300, help="timed steps")
     parser.add_argument("--pre-steps", type=int, default=20, help="untimed steps after the build")
+    parser.add_argument("--spacing", type=float, default=COMPACT_SPACING,
+                        help="lattice spacing [m] (default 2.04e-3; 2.4e-3 is settle.py's lattice, whose first "
+                             "~1000 steps are free fall)")
     parser.add_argument("--json", type=Path, default=DEFAULT_JSON)
     parser.add_argument("--launcher", help="MPI launcher prefix, given '-n RANKS' (default: python -m "
                         "pdemfem.launch, i.e. mpiexec with pdemfem's environment); e.g. 'srun --cpu-bind=cores'")
@@ -297,7 +303,8 @@ def main(argv=None) -> int:
     results = {"benchmark": "scaling", "started": time.strftime("%Y-%m-%d %H:%M:%S"),
                "machine": {"platform": platform.platform(), "cpus_available": len(os.sched_getaffinity(0)),
                            "load_average_1min_at_start": os.getloadavg()[0]},
-               "scene": "benchmarks/settle.py scene_dict", "steps": args.steps, "pre_steps": args.pre_steps}
+               "scene": "benchmarks/scaling.py scene_dict (settle.py's scene)", "spacing": args.spacing,
+               "steps": args.steps, "pre_steps": args.pre_steps}
     for mode in (("strong", "weak") if args.mode == "both" else (args.mode,)):
         results[mode] = study(mode, args)
         print_table(mode, results[mode])

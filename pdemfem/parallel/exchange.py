@@ -48,24 +48,29 @@ def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.nd
     layout, width = state.migrating_layout()
     leaving = np.flatnonzero(destinations != rank)
     packed = state.pack_rows(leaving, layout, width)
-    # Records follow their owner: look the owner id up among the owned ids.
-    owner_rows = _rows_of_ids(state.ids, records[:, 0].astype(np.int64)) if len(records) else np.zeros(0, np.int64)
-    record_destinations = destinations[owner_rows] if len(records) else np.zeros(0, dtype=np.int64)
+    # Records follow their owner.  Only the leaving particles' records move: look each record's
+    # owner up among the (few) leaving ids, not among all owned ids (a random-access search
+    # over every owned particle cost ~75 ms per rebuild at 100k particles and 400k records).
+    leaving_ids = state.ids[leaving]
+    order = np.argsort(leaving_ids)
+    sorted_ids = leaving_ids[order]
+    moving_records = np.zeros(len(records), dtype=bool)
+    record_destinations = np.zeros(0, dtype=np.int64)
+    if len(records) and len(sorted_ids):
+        owners = records[:, 0].astype(np.int64)
+        position = np.minimum(np.searchsorted(sorted_ids, owners), len(sorted_ids) - 1)
+        moving_records = sorted_ids[position] == owners
+        record_destinations = destinations[leaving][order][position[moving_records]].astype(np.int64)
     staying = np.ones(state.owned_count, dtype=bool)
     staying[leaving] = False
     state.keep(np.flatnonzero(staying))
     incoming = _alltoallv_rows(comm, packed, destinations[leaving].astype(np.int64), width)
     state.append_rows(incoming, layout, as_ghosts=False)
-    kept_records = records[record_destinations == rank]
-    moving_records = record_destinations != rank
-    incoming_records = _alltoallv_rows(comm, records[moving_records],
-                                       record_destinations[moving_records].astype(np.int64), records.shape[1])
-    return np.concatenate([kept_records, incoming_records])
-
-
-def _rows_of_ids(ids: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    order = np.argsort(ids)
-    return order[np.searchsorted(ids, wanted, sorter=order)]
+    any_moving = bool(moving_records.any())
+    kept_records = records[~moving_records] if any_moving else records
+    incoming_records = _alltoallv_rows(comm, records[moving_records] if any_moving else records[:0],
+                                       record_destinations, records.shape[1])
+    return np.concatenate([kept_records, incoming_records]) if len(incoming_records) else kept_records
 
 
 class GhostExchange:

@@ -272,7 +272,6 @@ def run_shear(comm, out):
     previous, _ = owners(comm, sim, total)
     changes = np.zeros(total, dtype=np.int64)
     counts, duplicates = [], 0
-    travelled = 0.0
     for _ in range(SHEAR_STEPS):
         sim.step(1)  # sampled every step: no crossing is missed
         owner, copies = owners(comm, sim, total)
