@@ -60,8 +60,9 @@ def restore_records(row_particles, offsets, partners, history, ids, owned_count,
     record_count = records.shape[0]
     if record_count == 0:
         return
+    # Load factor at most 3/4: short probe chains, and the table stays small next to the list.
     size = 1
-    while size < 2 * record_count:
+    while 3 * size < 4 * record_count:
         size *= 2
     mask = np.int64(size - 1)
     table = np.full(size, _EMPTY, dtype=np.int64)

@@ -62,16 +62,22 @@ def _near_walls(positions, radii, skin, points, normals):
     offsets = np.empty(wall_count)
     for w in range(wall_count):
         offsets[w] = points[w, 0] * normals[w, 0] + points[w, 1] * normals[w, 1] + points[w, 2] * normals[w, 2]
-    particles = np.empty(positions.shape[0] * wall_count, dtype=np.int64)
-    walls = np.empty(positions.shape[0] * wall_count, dtype=np.int64)
-    count = 0
-    for i in range(positions.shape[0]):
-        reach = radii[i] + skin
-        for w in range(wall_count):
-            distance = (positions[i, 0] * normals[w, 0] + positions[i, 1] * normals[w, 1]
-                        + positions[i, 2] * normals[w, 2] - offsets[w])
-            if distance < reach:
-                particles[count] = i
-                walls[count] = w
-                count += 1
-    return particles[:count].copy(), walls[:count].copy()
+    # Two passes (count, then fill) keep the allocation to the pairs actually near a wall.
+    particles = np.empty(0, dtype=np.int64)
+    walls = np.empty(0, dtype=np.int64)
+    for fill in (False, True):
+        count = 0
+        for i in range(positions.shape[0]):
+            reach = radii[i] + skin
+            for w in range(wall_count):
+                distance = (positions[i, 0] * normals[w, 0] + positions[i, 1] * normals[w, 1]
+                            + positions[i, 2] * normals[w, 2] - offsets[w])
+                if distance < reach:
+                    if fill:
+                        particles[count] = i
+                        walls[count] = w
+                    count += 1
+        if not fill:
+            particles = np.empty(count, dtype=np.int64)
+            walls = np.empty(count, dtype=np.int64)
+    return particles, walls
