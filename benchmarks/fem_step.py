@@ -65,7 +65,9 @@ def main(argv=None):
     step = (time.perf_counter() - start) / args.steps
 
     dofs = 3 * solid.n_global_nodes
-    info = solid.stiffness.getInfo()
+    from petsc4py import PETSc
+
+    info = solid.stiffness.getInfo(PETSc.Mat.InfoType.LOCAL)  # this rank's part; summed below
     matrix_mb = comm.allreduce(info["nz_used"]) * 8 / 1e6  # values only (BAIJ: one index per 3x3 block)
     peak_mb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 1e3
     if comm.rank == 0:
