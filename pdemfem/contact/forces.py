@@ -113,9 +113,11 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
     fx = -tangential_stiffness * xi_x - tangential_damping * tx
     fy = -tangential_stiffness * xi_y - tangential_damping * ty
     fz = -tangential_stiffness * xi_z - tangential_damping * tz
-    tangential_force = math.sqrt(fx * fx + fy * fy + fz * fz)
+    tangential_force_squared = fx * fx + fy * fy + fz * fz
     friction_limit = friction * normal_force
-    if tangential_force > friction_limit:
+    # Squares compared: the square root is only needed by sliding contacts.
+    if tangential_force_squared > friction_limit * friction_limit:
+        tangential_force = math.sqrt(tangential_force_squared)
         # Coulomb slip: cap the force and let the spring alone hold it (S_t xi = -F_t).  Folding the
         # dashpot into xi as well, xi = -(F_t + c v_t) / S_t, points xi against the force whenever
         # c |v_t| > mu F_n; with S_t growing (Hertz) the next step's force then pushes along the slip.
