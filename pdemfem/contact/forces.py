@@ -163,6 +163,42 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
     return fx, fy, fz, mx, my, mz, normal_energy + spring_energy, dissipated
 
 
+@njit(inline="always", cache=True)
+def rigid_wall_contact(i, nx, ny, nz, distance, surface_vx, surface_vy, surface_vz, wall_material, history, slot,
+                       velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
+                       effective_modulus, effective_shear_modulus, damping, friction, rolling_friction, model_code,
+                       normal_stiffness, tangential_ratio, characteristic_speed, dt, rolling_enabled, forces, torques):
+    """Contact of particle i with a rigid wall (R = inf, m = inf): plane, cylinder or triangle.
+
+    n is the wall's normal at the contact point, which lies `distance` below the centre
+    along -n and moves with the surface velocity.  Adds the force and torque to particle i
+    and returns (fx, fy, fz, mx, my, mz, elastic, dissipated): the force and rolling couple
+    on the particle (the wall gets the opposite) and the contact's energies.
+    """
+    lever = distance
+    wx = angular_velocities[i, 0]
+    wy = angular_velocities[i, 1]
+    wz = angular_velocities[i, 2]
+    vx = velocities[i, 0] - surface_vx - lever * (wy * nz - wz * ny)
+    vy = velocities[i, 1] - surface_vy - lever * (wz * nx - wx * nz)
+    vz = velocities[i, 2] - surface_vz - lever * (wx * ny - wy * nx)
+    material_i = material_index[i]
+    fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
+        nx, ny, nz, radii[i] - distance, vx, vy, vz, wx, wy, wz, mass[i], radii[i],
+        effective_modulus[material_i, wall_material], effective_shear_modulus[material_i, wall_material],
+        damping[material_i, wall_material], friction[material_i, wall_material],
+        rolling_friction[material_i, wall_material], model_code[material_i, wall_material],
+        normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
+        characteristic_speed, 1.0 / inverse_inertia[i], history, slot, dt, rolling_enabled)
+    forces[i, 0] += fx
+    forces[i, 1] += fy
+    forces[i, 2] += fz
+    torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
+    torques[i, 1] += -lever * (nz * fx - nx * fz) + my
+    torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
+    return fx, fy, fz, mx, my, mz, elastic, dissipated
+
+
 @njit(cache=True)
 def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history, ids, owned_count,
                 positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
@@ -319,32 +355,16 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
             wall_history[i, w, 2] = 0.0
             continue
         # Contact point on the plane, `distance` below the centre.
-        lever = distance
-        wx = angular_velocities[i, 0]
-        wy = angular_velocities[i, 1]
-        wz = angular_velocities[i, 2]
-        vx = velocities[i, 0] - wall_velocities[w, 0] - lever * (wy * nz - wz * ny)
-        vy = velocities[i, 1] - wall_velocities[w, 1] - lever * (wz * nx - wx * nz)
-        vz = velocities[i, 2] - wall_velocities[w, 2] - lever * (wx * ny - wy * nx)
-        material_i = material_index[i]
-        material_w = wall_material[w]
-        fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
-            nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, mass[i], radius,
-            effective_modulus[material_i, material_w], effective_shear_modulus[material_i, material_w],
-            damping[material_i, material_w], friction[material_i, material_w],
-            rolling_friction[material_i, material_w], model_code[material_i, material_w],
-            normal_stiffness[material_i, material_w], tangential_ratio[material_i, material_w],
-            characteristic_speed, 1.0 / inverse_inertia[i], wall_history[i], w, dt, rolling_enabled)
+        fx, fy, fz, _, _, _, elastic, dissipated = rigid_wall_contact(
+            i, nx, ny, nz, distance, wall_velocities[w, 0], wall_velocities[w, 1], wall_velocities[w, 2],
+            wall_material[w], wall_history[i], w, velocities, angular_velocities, radii, mass, inverse_inertia,
+            material_index, effective_modulus, effective_shear_modulus, damping, friction, rolling_friction,
+            model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt, rolling_enabled,
+            forces, torques)
         elastic_total += elastic
         dissipated_total += dissipated
         contacts += 1
-        forces[i, 0] += fx
-        forces[i, 1] += fy
-        forces[i, 2] += fz
         wall_forces[w, 0] -= fx
         wall_forces[w, 1] -= fy
         wall_forces[w, 2] -= fz
-        torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
-        torques[i, 1] += -lever * (nz * fx - nx * fz) + my
-        torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
     return elastic_total, dissipated_total, contacts

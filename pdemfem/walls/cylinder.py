@@ -21,7 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-from pdemfem.contact.forces import contact_response, released_spring_energy
+from pdemfem.contact.forces import released_spring_energy, rigid_wall_contact
 from pdemfem.walls.mesh import ContributorWall, rotation_matrix
 from pdemfem.walls.triangle_contact import SLOT_COLUMNS
 
@@ -92,31 +92,16 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         sx = velocity[0] + angular_velocity[1] * az - angular_velocity[2] * ay
         sy = velocity[1] + angular_velocity[2] * ax - angular_velocity[0] * az
         sz = velocity[2] + angular_velocity[0] * ay - angular_velocity[1] * ax
-        wx = angular_velocities[i, 0]
-        wy = angular_velocities[i, 1]
-        wz = angular_velocities[i, 2]
-        vx = velocities[i, 0] - sx - lever * (wy * nz - wz * ny)
-        vy = velocities[i, 1] - sy - lever * (wz * nx - wx * nz)
-        vz = velocities[i, 2] - sz - lever * (wx * ny - wy * nx)
-        overlap = radius - distance
-        fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
-            nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, mass[i], radius,
-            effective_modulus[material_i, wall_material], effective_shear_modulus[material_i, wall_material],
-            damping[material_i, wall_material], friction[material_i, wall_material],
-            rolling_friction[material_i, wall_material], model_code[material_i, wall_material],
-            normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
-            characteristic_speed, 1.0 / inverse_inertia[i], history[i], 0, dt, rolling_enabled)
-        history[i, 0, 3] = overlap
+        fx, fy, fz, mx, my, mz, elastic, dissipated = rigid_wall_contact(
+            i, nx, ny, nz, distance, sx, sy, sz, wall_material, history[i], 0, velocities, angular_velocities,
+            radii, mass, inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping,
+            friction, rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt,
+            rolling_enabled, forces, torques)
+        history[i, 0, 3] = radius - distance  # this step's overlap
         elastic_total += elastic
         dissipated_total += dissipated
         work += (fx * sx + fy * sy + fz * sz) * dt
         contacts += 1
-        forces[i, 0] += fx
-        forces[i, 1] += fy
-        forces[i, 2] += fz
-        torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
-        torques[i, 1] += -lever * (nz * fx - nx * fz) + my
-        torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
         totals[0] -= fx
         totals[1] -= fy
         totals[2] -= fz

@@ -42,7 +42,7 @@ import math
 import numpy as np
 from numba import njit
 
-from pdemfem.contact.forces import contact_response, released_spring_energy
+from pdemfem.contact.forces import released_spring_energy, rigid_wall_contact
 
 REGION_FACE = 0
 REGION_EDGE_AB = 1
@@ -338,32 +338,15 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
             sx = wa * vertex_velocities[a, 0] + wb * vertex_velocities[b, 0] + wc * vertex_velocities[c, 0]
             sy = wa * vertex_velocities[a, 1] + wb * vertex_velocities[b, 1] + wc * vertex_velocities[c, 1]
             sz = wa * vertex_velocities[a, 2] + wb * vertex_velocities[b, 2] + wc * vertex_velocities[c, 2]
-            wx = angular_velocities[i, 0]
-            wy = angular_velocities[i, 1]
-            wz = angular_velocities[i, 2]
-            lever = distance
-            vx = velocities[i, 0] - sx - lever * (wy * nz - wz * ny)
-            vy = velocities[i, 1] - sy - lever * (wz * nx - wx * nz)
-            vz = velocities[i, 2] - sz - lever * (wx * ny - wy * nx)
-            material_i = material_index[i]
-            overlap = radius - distance
-            fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
-                nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, mass[i], radius,
-                effective_modulus[material_i, wall_material], effective_shear_modulus[material_i, wall_material],
-                damping[material_i, wall_material], friction[material_i, wall_material],
-                rolling_friction[material_i, wall_material], model_code[material_i, wall_material],
-                normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
-                characteristic_speed, 1.0 / inverse_inertia[i], history, slot, dt, rolling_enabled)
-            history[slot, 3] = overlap
+            fx, fy, fz, mx, my, mz, elastic, dissipated = rigid_wall_contact(
+                i, nx, ny, nz, distance, sx, sy, sz, wall_material, history, slot, velocities, angular_velocities,
+                radii, mass, inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping,
+                friction, rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed,
+                dt, rolling_enabled, forces, torques)
+            history[slot, 3] = radius - distance  # this step's overlap
             elastic_total += elastic
             dissipated_total += dissipated
             work += (fx * sx + fy * sy + fz * sz) * dt
-            forces[i, 0] += fx
-            forces[i, 1] += fy
-            forces[i, 2] += fz
-            torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
-            torques[i, 1] += -lever * (nz * fx - nx * fz) + my
-            torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
             # The wall gets -F at q and the opposite rolling couple.
             totals[0] -= fx
             totals[1] -= fy
