@@ -1,6 +1,7 @@
 """Velocity Verlet for spheres: half kick, drift, (forces), half kick — owned rows only."""
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 
@@ -16,7 +17,12 @@ def kick(owned_count, velocities, angular_velocities, forces, torques, inverse_m
 
 @njit(cache=True)
 def drift(owned_count, positions, velocities, dt, positions_at_build):
-    """x += dt v; returns the largest squared displacement since the last list build."""
+    """x += dt v; returns the largest squared displacement since the last list build.
+
+    A non-finite position (a blown-up particle) returns inf, so the caller rebuilds at
+    once and the rebuild removes the particle before its NaN reaches the contact kernels
+    (a plain maximum would skip NaN).
+    """
     largest = 0.0
     for i in range(owned_count):
         displacement_squared = 0.0
@@ -24,6 +30,8 @@ def drift(owned_count, positions, velocities, dt, positions_at_build):
             positions[i, axis] += dt * velocities[i, axis]
             offset = positions[i, axis] - positions_at_build[i, axis]
             displacement_squared += offset * offset
-        if displacement_squared > largest:
+        if not displacement_squared < np.inf:
+            largest = np.inf
+        elif displacement_squared > largest:
             largest = displacement_squared
     return largest
