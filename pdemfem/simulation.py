@@ -97,7 +97,7 @@ class Simulation:
         # Mesh and cylinder walls, and the solids' contact surfaces, plug into the particle system as contributors.
         self.contributor_walls = build_contributor_walls(scene, self.base_dir, tables.material_names)
         self.coupled_surfaces = [
-            CoupledSurface(self.solids[config.name], tables.material_names.index(config.material))
+            CoupledSurface(self.solids[config.name], tables.surface_row(config.name, config.material))
             for config in scene.solids if config.contact
         ]
         self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]

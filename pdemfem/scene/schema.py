@@ -231,6 +231,11 @@ class CouplingConfig(StrictModel):
     fem_every: Annotated[int, Field(ge=1)] = Field(
         1, description="advance the solids every k DEM steps with the mean load of those steps "
                        "(k x cheaper FE work; the surface lags up to k steps)")
+    contact_modulus: Literal["combined", "particle"] = Field(
+        "combined", description="E*, G* of particle-solid contacts: combined = both materials' compliance (the "
+                                "contact law holds the solid's local Hertz deformation; right when the mesh is "
+                                "coarser than the contact radius), particle = the particle's only (the FE mesh "
+                                "supplies the solid's deformation; docs/coupling.md)")
 
 
 class Scene(StrictModel):
