@@ -42,6 +42,7 @@ import pdemfem  # noqa: F401  (environment first)
 
 from pdemfem import Simulation
 from pdemfem.contact.restitution import normal_damping_coefficient
+from pdemfem.errors import SolverError
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_JSON = HERE / "results" / "coupled_refinement.json"
@@ -128,7 +129,8 @@ def measure_impact(data: dict, output_dir: str, max_steps: int = 20000) -> dict:
       sphere, independent of where a weak ringing tail of the pulse ends (a block's ringing surface
       switches the nearly zero clamped force on and off for a few steps at the end).
     duration: the force-pulse width at WIDTH_LEVEL of the reference peak force (interpolated).
-    sampled_peak_force: the largest sampled force (peak_force, filtered, see against_reference).  block_indentation: the largest downward top displacement."""
+    sampled_peak_force: the largest sampled force (peak_force, filtered, see against_reference).  block_indentation:
+    the largest downward top displacement; surface_speed: the largest vertical top-node speed."""
     sim = Simulation.from_dict(data, output_dir=output_dir)
     dt = sim.dt
     started = time.perf_counter()
@@ -136,7 +138,7 @@ def measure_impact(data: dict, output_dir: str, max_steps: int = 20000) -> dict:
     if solid is not None:
         top_nodes = solid.group_node_numbers("zmax")
         settled_top = solid.displacements[top_nodes, 2].copy()   # the static sag under the block's own weight
-    times, forces, free, deepest, touched = [0.0], [0.0], 0, 0.0, False
+    times, forces, free, deepest, surface_speed, touched = [0.0], [0.0], 0, 0.0, 0.0, False
     for _ in range(max_steps):
         sim.step()
         force = abs(float(sim.wall_force("block")[2]))
@@ -146,13 +148,14 @@ def measure_impact(data: dict, output_dir: str, max_steps: int = 20000) -> dict:
         free = free + 1 if touched and force == 0.0 else 0
         if solid is not None and touched:
             deepest = max(deepest, float(-(solid.displacements[top_nodes, 2] - settled_top).min()))
+            surface_speed = max(surface_speed, float(abs(solid.velocities[top_nodes, 2]).max()))
         if free == FREE_STEPS:
             break
     else:
         raise RuntimeError("the sphere did not rebound within max_steps")
     invariant = float(sim.particles.velocities[0, 2]) + GRAVITY * sim.time
     return {"invariant": invariant, "forces": forces, "times": times, "sampled_peak_force": max(forces),
-            "block_indentation": deepest, "fem_substeps": sim.coupling.fem_substeps.get("block", 0), "dt": dt,
+            "block_indentation": deepest, "surface_speed": surface_speed, "fem_substeps": sim.coupling.fem_substeps.get("block", 0), "dt": dt,
             "seconds": time.perf_counter() - started}
 
 
@@ -163,7 +166,8 @@ def against_reference(measured: dict, ref: dict) -> dict:
     result = {key: value for key, value in measured.items() if key not in ("forces", "times", "invariant")}
     window = max(1, round(PEAK_WINDOW * ref["duration"] / measured["dt"]))
     forces = measured["forces"]
-    smoothed = max(sum(forces[k:k + window]) / window for k in range(len(forces) - window + 1))
+    smoothed = max((sum(forces[k:k + window]) / window for k in range(len(forces) - window + 1)),
+                   default=measured["sampled_peak_force"])
     result.update(rebound=rebound, duration=width, peak_force=smoothed)
     return result
 
@@ -173,7 +177,8 @@ def damped_hertz_impact(e_star: float, mass: float = None, radius: float = RADIU
     """The kernel's clamped damped Hertz law (pdemfem.contact.restitution) for a sphere on an immovable
     half-space, with gravity: m d'' = -max(0, k d^1.5 + gamma sqrt(m S_n) d') + m g, k = 4/3 E* sqrt(R),
     S_n = 1.5 k sqrt(d), d(0) = 0, d'(0) = speed.  Returns the rebound speed (-d' when the clamped force
-    first vanishes: the sphere then flies freely), the separation time, the peak force and the pulse
+    first vanishes: the sphere then flies freely), the separation time, the peak force, the largest
+    overlap and the pulse
     duration (width at WIDTH_LEVEL of the peak, as measured in the simulations).  RK4, h = `step`
     (~1/30000 of the pulse: error ~1e-10 relative), the end interpolated linearly between steps."""
     mass = sphere_mass() if mass is None else mass
@@ -188,7 +193,7 @@ def damped_hertz_impact(e_star: float, mass: float = None, radius: float = RADIU
     def accel(d, v):
         return -max(0.0, force(d, v)) / mass + gravity
 
-    t, d, v, previous = 0.0, 0.0, speed, 0.0
+    t, d, v, previous, deepest = 0.0, 0.0, speed, 0.0, 0.0
     times, forces = [0.0], [0.0]
     while True:
         k1d, k1v = v, accel(d, v)
@@ -204,8 +209,10 @@ def damped_hertz_impact(e_star: float, mass: float = None, radius: float = RADIU
             forces.append(0.0)
             peak = max(forces)
             return {"rebound": -(v + fraction * (new_v - v)), "separation": times[-1], "peak_force": peak,
+                    "max_overlap": deepest,
                     "duration": pulse_width(times, forces, WIDTH_LEVEL * peak)}
         t, d, v, previous = t + step, new_d, new_v, f
+        deepest = max(deepest, d)
         times.append(t)
         forces.append(f)
 
@@ -230,8 +237,15 @@ def run(blocks, elements, cells_list, moduli, dt=DT, restitution=RESTITUTION, lo
             for element in elements:
                 for modulus in moduli:
                     for cells in cells_list:
-                        measured = against_reference(
-                            measure_impact(scene(block, element, cells, modulus, dt=dt, restitution=restitution), scratch), ref)
+                        try:
+                            measured = against_reference(measure_impact(
+                                scene(block, element, cells, modulus, dt=dt, restitution=restitution), scratch), ref)
+                        except (SolverError, RuntimeError) as error:   # a case that blows up is a result too
+                            results["cases"].append(dict(block=block, element=element, cells=cells, modulus=modulus,
+                                                         failed=str(error).splitlines()[0]))
+                            log(f"{block:5s} {element:5s} {cells}x{cells}x{max(1, cells // 2)} {modulus:8s} FAILED: "
+                                f"{str(error).splitlines()[0]}")
+                            continue
                         results["cases"].append(dict(block=block, element=element, cells=cells, modulus=modulus,
                                                      **measured))
                         log(_row(block, element, cells, modulus, measured, ref))
@@ -264,7 +278,7 @@ def plot(results: dict, path: Path) -> None:
             for element, marker in (("P1", "o"), ("P2", "s")):
                 for modulus, style in (("combined", "-"), ("particle", "--")):
                     cases = [c for c in results["cases"] if c["block"] == block and c["element"] == element
-                             and c["modulus"] == modulus]
+                             and c["modulus"] == modulus and "failed" not in c]
                     if cases:
                         axis.plot([c["cells"] for c in cases], [c[key] / ref[key] for c in cases], style,
                                   marker=marker, label=f"{element} {modulus}")
