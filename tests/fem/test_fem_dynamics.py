@@ -6,13 +6,24 @@ from fem_helpers import box_solid, dense, material
 from pdemfem.errors import SolverError
 
 
+def front_tail_envelope(h: float, courant: float, travelled: float, distances, spacing: float) -> float:
+    """Envelope of the probe error of test_longitudinal_wave_travels_at_bar_speed: the dispersion tail of the
+    discrete front.  Central difference with lumped mass on a 1-D chain has omega = ck - beta k^3 with
+    beta = c h^2 (1 - C^2) / 24 (C the Courant number): the long waves travel at exactly c, the short ones lag,
+    and a velocity step spreads into an Airy profile of width w = (c t h^2 (1 - C^2) / 8)^(1/3) whose total
+    displacement defect is zero.  At s = d / w widths behind the front the displacement error is
+    v0 w / c * int_s^inf of the Airy tail <= v0 w / c * s^(-5/4) / sqrt(pi), so the relative error of
+    u1 - u2 = v0 spacing / c is at most (w / spacing) sum_probes s^(-5/4) / sqrt(pi)."""
+    width = (travelled * h**2 * (1.0 - courant**2) / 8.0) ** (1.0 / 3.0)
+    return width / spacing * sum((d / width) ** -1.25 for d in distances) / np.sqrt(np.pi)
+
+
 def test_longitudinal_wave_travels_at_bar_speed():
     # 1-D setting: nu = 0 (no lateral coupling), a velocity step v0 at x = 0.  Behind the front
     # u(x, t) = v0 (t - x / c), so two probes give c = v0 (x2 - x1) / (u1 - u2) exactly in the continuum;
     # measured before the reflection from x = L returns to x2 = L/2 (t < 1.5 L / c).
     E, rho, L, v0 = 2e11, 7800.0, 1.0, 1e-3
     c = np.sqrt(E / rho)
-    errors = []
     for nx in (40, 80):
         solid = box_solid((0, 0, 0), (L, 0.05, 0.05), (nx, 1, 1), material(E=E, nu=0.0, rho=rho),
                           prescribed=[{"group": "xmin", "velocity": [v0, None, None]}])
@@ -23,10 +34,17 @@ def test_longitudinal_wave_travels_at_bar_speed():
         x = solid.reference_positions[:, 0]
         u = solid.displacements[:, 0]
         u1, u2 = u[np.isclose(x, 0.25 * L)].mean(), u[np.isclose(x, 0.5 * L)].mean()
-        errors.append(abs(v0 * 0.25 * L / (u1 - u2) / c - 1.0))
-    # dispersion of the discrete front is O(h^2): measured 0.25 % and 0.06 %
-    assert errors[1] < errors[0]
-    assert errors[1] < 0.01
+        error = abs(v0 * 0.25 * L / (u1 - u2) / c - 1.0)
+        # The incident front is at 1.4 L (reflected: 0.6 L, which the probes at 0.25 L, 0.5 L lie ahead of, where
+        # the Airy profile decays exponentially): the probes are 1.15 L and 0.9 L behind it.
+        envelope = front_tail_envelope(L / nx, c * end / steps / (L / nx), c * end, (1.15 * L, 0.9 * L), 0.25 * L)
+        print(f"nx = {nx}: wave speed error {error:.3g}, dispersion-tail envelope {envelope:.3g}")
+        # The error is the tail's oscillation at the probes: its sign and size depend on the phase there, so it
+        # is not monotone in h (measured 2.7e-4 at nx = 40, 2.4e-4 at 80, 1.1e-4 at 160), within the envelope
+        # (3.5e-3, 1.1e-3, 3.6e-4: it falls as h^(3/2)).  The envelope is asymptotic in s: at nx = 20 (s ~ 12)
+        # the measured 1.3e-2 exceeds its 1.2e-2, hence nx >= 40.  A stiffness or mass wrong by 0.4 % shifts c
+        # itself by 2e-3 and fails nx = 80.
+        assert error <= envelope
 
 
 @pytest.fixture(scope="module")
