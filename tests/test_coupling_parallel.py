@@ -22,6 +22,7 @@ def run(tmp_path, ranks, case, steps, *extra):
     return dict(np.load(out))
 
 
+@pytest.mark.mpi
 @pytest.mark.parametrize("case, steps", [("ball", 400), ("pile", 1500)])
 def test_one_and_three_ranks_agree(tmp_path, case, steps):
     serial = run(tmp_path, 1, case, steps)

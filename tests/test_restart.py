@@ -93,6 +93,7 @@ def test_serial_restart_is_bit_identical(serial_run, tmp_path, step):
             == list(range(0, STEPS + 1, EVERY))
 
 
+@pytest.mark.mpi
 def test_two_ranks_bit_identical_and_other_rank_counts(serial_run, tmp_path):
     serial_out, serial_state, tolerance = serial_run
     out = tmp_path / "two"
