@@ -369,11 +369,11 @@ def check_report(path: str) -> tuple:
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({derived.BYTES_PER_PARTICLE} B/particle, "
                      f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
         lines.append(f"work: {total * steps:.3g} particle-steps")
+    found = derived.warnings(scene)
     if scene.solids:
         from pdemfem.coupling.check import coupling_report
 
-        lines.extend(coupling_report(scene, base_dir, dt))
-    found = derived.warnings(scene)
+        lines.extend(coupling_report(scene, base_dir, dt, warnings=found))
     return lines, found
 
 

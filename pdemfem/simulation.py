@@ -46,6 +46,8 @@ class Simulation:
         self.step_count = 0
         self.solids = self._build_solids()
         self.particle_system = self._build_particles()
+        for surface in self.coupled_surfaces:
+            surface.particle_system = self.particle_system
         self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt,
                                        fem_every=scene.coupling.fem_every)
         self.io = SimulationIO(self)
@@ -265,12 +267,23 @@ class Simulation:
         # moved by a prescription: their exchange with the particles is internal to the system).
         energies["wall_work"] += sum(wall.work for wall in self.contributor_walls
                                      if not any(wall is surface.triangle_surface for surface in self.coupled_surfaces))
+        if self.solids:
+            energies["dissipated_energy"] += self.dashpot_dissipation()
         energies["solid_kinetic_energy"] = sum(solid.kinetic_energy() for solid in self.solids.values())
         energies["solid_strain_energy"] = sum(solid.strain_energy() for solid in self.solids.values())
         # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
         energies["solid_load_potential"] = -sum(solid.constant_load_vec.dot(solid.displacement_vec)
                                                 for solid in self.solids.values())
         return energies
+
+    def dashpot_dissipation(self) -> float:
+        """Collective: energy [J] the contact dashpots on solid surfaces dissipated beyond what the contact
+        kernels booked (coupling/dampers.py): the particle-side correction minus the dashpots' work on
+        the solids' nodes; part of dissipated_energy."""
+        local = np.array([sum(surface.dissipation_correction_local for surface in self.coupled_surfaces)
+                          - sum(solid.damper_work_local for solid in self.solids.values())])
+        self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+        return float(local[0])
 
     def total_energy(self) -> float:
         """Everything the bookkeeping tracks; constant up to integration error when no work is

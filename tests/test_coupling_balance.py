@@ -30,8 +30,8 @@ class TransferRecorder:
         original = CoupledSurface.collect_contact_forces
         recorder = self
 
-        def wrapped(surface):
-            original(surface)
+        def wrapped(surface, *args, **kwargs):
+            original(surface, *args, **kwargs)
             recorder.check(surface)
 
         monkeypatch.setattr(CoupledSurface, "collect_contact_forces", wrapped)

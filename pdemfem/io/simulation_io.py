@@ -192,6 +192,8 @@ class SimulationIO:
             if self.comm.size > 1:
                 self.comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
             surface.accumulated_forces[:] = total if self.comm.rank == 0 else 0.0
+            # The window's contact dashpots likewise move to rank 0, as a restart has them.
+            surface.restore_records(surface.checkpoint_records(self.comm), self.comm)
 
     def _global_state(self) -> tuple[dict, dict]:
         sim = self.sim
@@ -219,6 +221,9 @@ class SimulationIO:
             if self.comm.size > 1:
                 self.comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
             arrays[f"coupling:{surface.name}:accumulated_forces"] = total
+            arrays[f"coupling:{surface.name}:damper_records"] = surface.checkpoint_records(self.comm)
+        if sim.solids:
+            scalars["coupling"]["dashpot_dissipation"] = sim.dashpot_dissipation()
         for name, solid in sim.solids.items():
             scalars["solids"][name] = {"time": float(solid.time), "step_count": int(solid.step_count),
                                        "external_work": float(solid.external_work)}
@@ -320,7 +325,13 @@ class SimulationIO:
             surface.refresh_vertices()
             stored = checkpoint.globals[f"coupling:{surface.name}:accumulated_forces"]
             surface.accumulated_forces[:] = stored if self.comm.rank == 0 else 0.0
+            surface.restore_records(checkpoint.globals[f"coupling:{surface.name}:damper_records"], self.comm)
+            surface.dissipation_correction_local = 0.0
         coupling = scalars["coupling"]
+        for solid in sim.solids.values():
+            solid.damper_work_local = 0.0
+        if sim.coupled_surfaces and self.comm.rank == 0:
+            sim.coupled_surfaces[0].dissipation_correction_local = float(coupling["dashpot_dissipation"])
         sim.coupling.steps_since_advance = int(coupling["steps_since_advance"])
         sim.coupling.fem_substeps.update({k: int(v) for k, v in coupling["fem_substeps"].items()})
         if hasattr(sim.coupling, "advances"):
