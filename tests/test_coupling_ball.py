@@ -207,12 +207,11 @@ def test_sub_cycling_error_converges_as_fem_every_goes_to_one(tmp_path, element)
     print(f"{element}: rebound {speed:.6g} m/s, peak {f1:.6g} N; fem_every 2: {errors[2][0]:.2e} / {errors[2][1]:.2e}, "
           f"5: {errors[5][0]:.2e} / {errors[5][1]:.2e} (rebound / peak)")
     for which in (0, 1):
-        # Every error is bounded by the surface lag's effect: the block's surface moves w ~ 1e-4 m during the
-        # contact (peak force / block stiffness), so freezing it for (k - 1) dt of a t_c ~ 0.06 s contact
-        # shifts the overlap by ~ w (k - 1) dt / t_c against delta_max ~ 0.05 m: << 1e-2 at k = 5.
+        # Freezing the surface for (k - 1) dt of a t_c ~ 0.055 s contact: an error of the order of that fraction,
+        # (k - 1) dt / t_c = 7.3e-3 at k = 5 (measured up to 5.4e-3, P2; P1 1.0e-3).
         assert errors[5][which] < 1e-2
         if element == "P1":
             # P1: monotone, first order in (k - 1): the k = 5 error is 4x the k = 2 one within a factor 2.
             assert 2 * errors[2][which] < errors[5][which] < 8 * errors[2][which]
-        # P2 (measured): errors ~2-6e-4 at both k, not monotone: the P2 face's midside nodes add surface
-        # modes whose phase the sub-cycling shifts; only the bound is asserted.
+        # P2: the face's midside nodes add surface modes whose phase the sub-cycling shifts, so the errors need
+        # not be monotone in k (measured 6-8e-4 at k = 2, 4.7-5.4e-3 at k = 5); only the bound is asserted.
