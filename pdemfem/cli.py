@@ -306,25 +306,45 @@ def _format_bytes(value: float) -> str:
 def check_report(path: str) -> tuple:
     """(lines, warnings) for `pdemfem check`; raises SceneError for an invalid scene.
 
-    Builds the insertion as a run would, so overlapping list positions and regions
-    that cannot hold their count are reported here too.
+    Reads everything a run reads before its first step (the insertion, the mesh-wall and
+    solid mesh files) and applies the same checks, so overlapping list positions, regions
+    that cannot hold their count or lie outside domain.box, broken meshes, periodic lengths
+    below the cutoff and out-of-range coordinates are reported here too.
     """
-    from pdemfem.scene import derived
-    from pdemfem.scene.loader import load_scene, scene_hash
+    from pdemfem.scene.loader import load_scene
 
     scene, base_dir = load_scene(path)
     try:
-        from pdemfem.particles.insert import insert_particles
-    except ImportError:  # an engine without insertion: validate the schema only
-        insert_particles = None
-    if insert_particles is not None:
-        try:
-            inserted = insert_particles(scene)
-        except SceneError as error:
-            raise _name_the_file(error, path) from None
-        placed = len(inserted.radii)
-    else:
-        placed = None
+        placed = _validate_as_run(scene, base_dir)
+    except SceneError as error:
+        raise _name_the_file(error, path) from None
+    try:
+        return _report(path, scene, base_dir, placed)
+    except (OverflowError, ZeroDivisionError, FloatingPointError) as error:
+        # The schema's bounds cannot catch every combination of extreme values (a modulus near
+        # the float64 limit, ...); report it as the scene's fault, not with a traceback.
+        raise SceneError(str(path), f"the scene's numbers are out of range for the derived quantities ({error})",
+                         "check the magnitudes and units of the moduli, densities, radii and coordinates") from None
+
+
+def _validate_as_run(scene, base_dir) -> int:
+    """What `run` reads before its first step, read the same way: the insertion, the mesh-wall
+    files, and the checks that relate them (coordinates, domain.box, periodic lengths).
+    Returns the number of particles placed."""
+    from pdemfem.particles.insert import insert_particles
+    from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
+    from pdemfem.walls.mesh import build_contributor_walls
+
+    validate_scene_coordinates(scene)
+    inserted = insert_particles(scene)
+    walls = build_contributor_walls(scene, base_dir, list(scene.materials))
+    validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in walls if hasattr(wall, "vertices")])
+    return len(inserted.radii)
+
+
+def _report(path, scene, base_dir, placed) -> tuple:
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import scene_hash
 
     counts = derived.group_counts(scene)
     total = derived.particle_count(scene)

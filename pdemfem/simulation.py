@@ -22,6 +22,7 @@ from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
+from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
 from pdemfem.scene.loader import load_scene, output_directory
 from pdemfem.walls.mesh import build_contributor_walls
 from pdemfem.walls.plane import PlaneWalls
@@ -69,6 +70,7 @@ class Simulation:
     def _build_particles(self) -> ParticleSystem:
         scene = self.scene
         tables = build_contact_tables(scene, characteristic_speed=derived.expected_impact_speed(scene))
+        validate_scene_coordinates(scene)  # before the insertion bins them (as `pdemfem check`)
         inserted = insert_particles(scene)
         group_material = np.array([tables.material_names.index(group.material) for group in scene.particles],
                                   dtype=np.int32)
@@ -101,6 +103,8 @@ class Simulation:
             for config in scene.solids if config.contact
         ]
         self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]
+        validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in self.contributor_walls
+                                            if hasattr(wall, "vertices")])  # the checks `pdemfem check` makes
         smallest_radius = float(inserted.radii.min()) if count else 1.0
         skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
         return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm,

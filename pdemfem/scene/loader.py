@@ -138,7 +138,11 @@ def output_directory(
     scene: Scene, base_dir: Union[str, os.PathLike], override: Optional[Union[str, os.PathLike]] = None
 ) -> Path:
     """Where a run writes: ``override`` (the CLI's ``-o``, relative to the current
-    directory) if given, else ``output.dir`` resolved relative to the scene file."""
+    directory) if given, else ``output.dir`` resolved relative to the scene file.  An empty
+    override is an error: it would silently mean the current directory."""
+    if override is not None and not str(override).strip():
+        raise SceneError("output directory (-o / output_dir)", "is empty",
+                         "give a directory name, e.g. -o out/run1, or leave it out to use the scene's output.dir")
     if override is not None:
         return Path(override).expanduser().resolve()
     return resolve_path(base_dir, scene.output.dir).resolve()
@@ -490,6 +494,8 @@ def _one_problem(path: KeyPath, item: dict, data: Any) -> _Problem:
         name = str(path[-1]) if path else str(value)
         return _Problem(path[:-1] + (name,), f"key {name} is not a name",
                         "keys are names such as time or materials; rename it (or quote it: '1')")
+    if kind == "string_too_short":
+        return _Problem(path, "is empty", f"give {key} a value (a name or a path relative to the scene file)")
     if kind in ("too_long", "too_short"):
         expected = item.get("ctx", {}).get("max_length" if kind == "too_long" else "min_length")
         count = item.get("ctx", {}).get("actual_length")
