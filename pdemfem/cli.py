@@ -75,8 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     run.add_argument("--restart", metavar="FILE", help="continue from a checkpoint file (or a checkpoint "
                      "directory: its latest.h5), on any number of ranks")
-    run.add_argument("--force", action="store_true", help="with --restart: accept a checkpoint written for a "
-                     "scene whose physics changed (scene hash mismatch), e.g. after a deliberate edit")
+    run.add_argument("--force", action="store_true", help="start afresh in an output directory holding an "
+                     "earlier run's results (deletes them; checkpoints are never deleted); with --restart: accept "
+                     "a checkpoint written for a scene whose physics changed (scene hash mismatch)")
     run.set_defaults(handler=_command_run)
 
     check = commands.add_parser("check", help="validate a scene and print derived quantities (dt, contact duration, memory)")
@@ -262,6 +263,7 @@ def _command_run(arguments, comm) -> int:
     scene, base_dir = load_scene(arguments.scene)
     output_dir = output_directory(scene, base_dir, arguments.output)
     existed = output_dir.exists()
+    _refuse_earlier_results(scene, base_dir, output_dir, arguments, comm, existed)
 
     from pdemfem.simulation import Simulation
 
@@ -290,6 +292,22 @@ def _command_run(arguments, comm) -> int:
     simulation.run(progress=not arguments.quiet)
     _say(comm, f"results: {output_dir}", arguments.quiet)
     return 0
+
+
+def _refuse_earlier_results(scene, base_dir, output_dir, arguments, comm, existed: bool) -> None:
+    """Before the (possibly long) build: an output directory holding an earlier run's results is
+    refused unless --force or --restart, and both output directories must be writable.  The
+    earlier files are deleted (with --force) only when the run starts writing."""
+    from pdemfem.io.output_guard import prepare_output
+    from pdemfem.io.simulation_io import checkpoint_directory_of
+
+    try:
+        prepare_output(output_dir, checkpoint_directory_of(scene, base_dir, output_dir), comm,
+                       restart=arguments.restart is not None, force=arguments.force, clear=False)
+    except PdemfemError as error:
+        if not existed:
+            error.cleanup_dir = output_dir
+        raise
 
 
 # --------------------------------------------------------------------------- check

@@ -49,7 +49,7 @@ class Simulation:
         self.particle_system = self._build_particles()
         self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt,
                                        fem_every=scene.coupling.fem_every)
-        self.io = SimulationIO(self)
+        self.io = SimulationIO(self, force=force)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
         if restart is not None:
             self.io.restore(restart, force=force)

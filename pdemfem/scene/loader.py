@@ -36,6 +36,8 @@ __all__ = [
     "resolve_path",
     "output_directory",
     "scene_hash",
+    "scene_physics",
+    "physics_changes",
     "format_key_path",
     "key_line",
     "FILE_KEYS",
@@ -148,14 +150,9 @@ def output_directory(
     return resolve_path(base_dir, scene.output.dir).resolve()
 
 
-def scene_hash(scene: Union[Scene, Dict[str, Any]]) -> str:
-    """sha256 (hex) of the scene's physics: everything except time.end, output.* and checkpoint.*.
-
-    Canonical form: the validated model with defaults filled in, dumped to JSON
-    with sorted keys, so key order, spelling of numbers (1e-3 vs 0.001) and
-    omitted defaults do not change the hash.  Two scenes with the same hash
-    continue each other's checkpoints.
-    """
+def scene_physics(scene: Union[Scene, Dict[str, Any]]) -> Dict[str, Any]:
+    """The scene's physics as plain data: the validated model with defaults filled in, without
+    time.end, output.* and checkpoint.* (what `scene_hash` fingerprints)."""
     if not isinstance(scene, Scene):
         scene, _ = load_scene(scene)
     content = scene.model_dump(mode="json")
@@ -166,8 +163,50 @@ def scene_hash(scene: Union[Scene, Dict[str, Any]]) -> str:
             node = node.get(key, {}) if isinstance(node, dict) else {}
         if isinstance(node, dict):
             node.pop(last, None)
-    text = json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=True)
+    return content
+
+
+def scene_hash(scene: Union[Scene, Dict[str, Any]]) -> str:
+    """sha256 (hex) of the scene's physics: everything except time.end, output.* and checkpoint.*.
+
+    Canonical form: the validated model with defaults filled in, dumped to JSON
+    with sorted keys, so key order, spelling of numbers (1e-3 vs 0.001) and
+    omitted defaults do not change the hash.  Two scenes with the same hash
+    continue each other's checkpoints.
+    """
+    text = json.dumps(scene_physics(scene), sort_keys=True, separators=(",", ":"), allow_nan=True)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def physics_changes(old: Any, new: Any, path: KeyPath = (), limit: int = 8) -> List[str]:
+    """'key: old -> new' for every value that differs between two `scene_physics` dicts
+    (at most `limit`, then '... and N more')."""
+    changes: List[str] = []
+    _collect_changes(old, new, path, changes)
+    if len(changes) > limit:
+        changes = changes[:limit] + [f"... and {len(changes) - limit} more"]
+    return changes
+
+
+def _collect_changes(old: Any, new: Any, path: KeyPath, changes: List[str]) -> None:
+    if isinstance(old, dict) and isinstance(new, dict):
+        for key in list(old) + [key for key in new if key not in old]:
+            if key not in new:
+                changes.append(f"{format_key_path(path + (key,))}: removed (was {_short(old[key])})")
+            elif key not in old:
+                changes.append(f"{format_key_path(path + (key,))}: added ({_short(new[key])})")
+            else:
+                _collect_changes(old[key], new[key], path + (key,), changes)
+    elif isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        for index, (a, b) in enumerate(zip(old, new)):
+            _collect_changes(a, b, path + (index,), changes)
+    elif old != new:
+        changes.append(f"{format_key_path(path)}: {_short(old)} -> {_short(new)}")
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def key_line(scene_file: Union[str, os.PathLike], key: str) -> Optional[int]:
