@@ -18,6 +18,7 @@ from pdemfem.contact.tables import build_contact_tables
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
 from pdemfem.io.simulation_io import SimulationIO
+from pdemfem.parallel.api_safety import collective_errors, private_communicators
 from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
@@ -37,8 +38,10 @@ log = logging.getLogger("pdemfem")
 class Simulation:
     """A coupled DEM(-FEM) simulation built from a validated scene."""
 
+    @collective_errors
     def __init__(self, scene, base_dir: Path, comm=None, output_dir=None, restart=None, force: bool = False):
-        self.comm = comm if comm is not None else MPI.COMM_WORLD
+        # Private duplicates of the user's communicator (pdemfem.parallel.api_safety).
+        self.comm, self.error_comm = private_communicators(comm if comm is not None else MPI.COMM_WORLD)
         self.scene = scene
         self.base_dir = Path(base_dir)
         self.output_dir = output_directory(scene, self.base_dir, output_dir)
@@ -130,6 +133,7 @@ class Simulation:
         return solids
 
     # ------------------------------------------------------------ stepping
+    @collective_errors
     def step(self, count: int = 1) -> None:
         for _ in range(int(count)):
             self.particle_system.step()
@@ -145,6 +149,7 @@ class Simulation:
     def _steps_per(self, interval: float) -> int:
         return max(1, int(round(interval / self.dt)))
 
+    @collective_errors
     def run(self, progress: bool = True) -> None:
         """Advance to time.end, writing history rows and field series every output interval and
         checkpoints every checkpoint interval.  SIGTERM/SIGUSR1 stop the run at the next stop
@@ -193,6 +198,7 @@ class Simulation:
                 bar.close()
             self.io.close()
 
+    @collective_errors
     def write_checkpoint(self):
         """Collective: write a checkpoint now (checkpoint.dir); returns its path."""
         return self.io.write_checkpoint()
