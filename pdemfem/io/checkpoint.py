@@ -388,7 +388,7 @@ def _changed_physics_problem(attrs: dict, expected_hash: str, expected_physics) 
     if isinstance(stored, dict) and isinstance(expected_physics, dict):
         changes = physics_changes(stored, expected_physics)
         if changes:
-            return ("the scene's physics changed since the checkpoint was written:\n"
+            return ("the scene's physics changed since the checkpoint was written (scene hash mismatch):\n"
                     + "\n".join(f"    {change}" for change in changes))
     return (f"the scene's physics changed since the checkpoint was written (scene hash {attrs.get('scene_hash')}, "
             f"this scene {expected_hash}; the checkpoint does not record which keys)")
