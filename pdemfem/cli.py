@@ -2,7 +2,7 @@
 
     pdemfem run scene.yaml [-o DIR] [--quiet] [--restart FILE] [--force] [-fem_<option> [value] ...]
         (-fem_* arguments go to PETSc's options database: the FE solvers' prefixes fem_ and fem_mass_)
-    pdemfem check scene.yaml [--strict]
+    pdemfem check scene.yaml [--strict]     (reads and checks everything `run` reads before its first step)
     pdemfem info
     pdemfem plot OUTDIR [--quiet]
 
@@ -18,6 +18,9 @@ runs the same command.  Errors:
   calls ``MPI.COMM_WORLD.Abort(1)``, so no rank waits forever.
 * nothing is created on disk before the scene is validated and built; an output
   directory a failed `run` created during set-up is removed again.
+* an output directory holding an earlier run's results is refused (exit 2) unless
+  --force (start afresh) or --restart; checkpoints a run did not write are never
+  deleted or overwritten (pdemfem.io.output_guard).
 """
 from __future__ import annotations
 

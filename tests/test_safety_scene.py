@@ -188,3 +188,16 @@ def test_empty_output_directory_is_an_error(workdir, capsys):
     path = write_scene(workdir, SCENE.replace("dir: results", 'dir: ""'))
     code, _, err = run_main(capsys, "check", path)
     assert_refused(code, err, "output.dir: is empty")
+
+
+def test_nan_node_in_a_solid_mesh_is_refused(workdir, capsys):
+    import meshio
+    import numpy as np
+
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, np.nan]], dtype=float)
+    cells = [("tetra", np.array([[0, 1, 2, 3], [1, 2, 3, 4]]))]
+    meshio.write_points_cells(str(workdir / "block.vtu"), points, cells)
+    path = write_scene(workdir, SCENE.replace("output:", "solids:\n  - {name: block, mesh: block.vtu, material: glass}\n"
+                                                         "output:"))
+    code, _, err = run_main(capsys, "check", path)
+    assert_refused(code, err, "block.vtu", "NaN or infinite coordinate", "node 4")
