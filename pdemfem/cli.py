@@ -2,7 +2,7 @@
 
     pdemfem run scene.yaml [-o DIR] [--quiet] [--restart FILE] [--force] [-fem_<option> [value] ...]
         (-fem_* arguments go to PETSc's options database: the FE solvers' prefixes fem_ and fem_mass_)
-    pdemfem check scene.yaml [--strict]
+    pdemfem check scene.yaml [--strict]     (reads and checks everything `run` reads before its first step)
     pdemfem info
     pdemfem plot OUTDIR [--quiet]
 
@@ -18,6 +18,9 @@ runs the same command.  Errors:
   calls ``MPI.COMM_WORLD.Abort(1)``, so no rank waits forever.
 * nothing is created on disk before the scene is validated and built; an output
   directory a failed `run` created during set-up is removed again.
+* an output directory holding an earlier run's results is refused (exit 2) unless
+  --force (start afresh) or --restart; checkpoints a run did not write are never
+  deleted or overwritten (pdemfem.io.output_guard).
 """
 from __future__ import annotations
 
@@ -75,8 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     run.add_argument("--restart", metavar="FILE", help="continue from a checkpoint file (or a checkpoint "
                      "directory: its latest.h5), on any number of ranks")
-    run.add_argument("--force", action="store_true", help="with --restart: accept a checkpoint written for a "
-                     "scene whose physics changed (scene hash mismatch), e.g. after a deliberate edit")
+    run.add_argument("--force", action="store_true", help="start afresh in an output directory holding an "
+                     "earlier run's results (deletes them; checkpoints are never deleted); with --restart: accept "
+                     "a checkpoint written for a scene whose physics changed (scene hash mismatch)")
     run.set_defaults(handler=_command_run)
 
     check = commands.add_parser("check", help="validate a scene and print derived quantities (dt, contact duration, memory)")
@@ -169,6 +173,10 @@ def _set_petsc_options(options) -> None:
     database = PETSc.Options()
     for name, value in options:
         database.setValue(name[1:], value if value is not None else "")
+    # PETSc's unused-options report at exit: a misspelt option (-fem_ksp_rtoll) or one no solver
+    # of this scene reads is listed ("Option left: name:-fem_ksp_rtoll ...") instead of ignored.
+    if not database.hasName("options_left"):
+        database.setValue("options_left", "")
 
 
 def _fail_together(comm, error: PdemfemError) -> int:
@@ -262,6 +270,7 @@ def _command_run(arguments, comm) -> int:
     scene, base_dir = load_scene(arguments.scene)
     output_dir = output_directory(scene, base_dir, arguments.output)
     existed = output_dir.exists()
+    _refuse_earlier_results(scene, base_dir, output_dir, arguments, comm, existed)
 
     from pdemfem.simulation import Simulation
 
@@ -292,6 +301,22 @@ def _command_run(arguments, comm) -> int:
     return 0
 
 
+def _refuse_earlier_results(scene, base_dir, output_dir, arguments, comm, existed: bool) -> None:
+    """Before the (possibly long) build: an output directory holding an earlier run's results is
+    refused unless --force or --restart, and both output directories must be writable.  The
+    earlier files are deleted (with --force) only when the run starts writing."""
+    from pdemfem.io.output_guard import prepare_output
+    from pdemfem.io.simulation_io import checkpoint_directory_of
+
+    try:
+        prepare_output(output_dir, checkpoint_directory_of(scene, base_dir, output_dir), comm,
+                       restart=arguments.restart is not None, force=arguments.force, clear=False)
+    except PdemfemError as error:
+        if not existed:
+            error.cleanup_dir = output_dir
+        raise
+
+
 # --------------------------------------------------------------------------- check
 
 
@@ -306,25 +331,45 @@ def _format_bytes(value: float) -> str:
 def check_report(path: str) -> tuple:
     """(lines, warnings) for `pdemfem check`; raises SceneError for an invalid scene.
 
-    Builds the insertion as a run would, so overlapping list positions and regions
-    that cannot hold their count are reported here too.
+    Reads everything a run reads before its first step (the insertion, the mesh-wall and
+    solid mesh files) and applies the same checks, so overlapping list positions, regions
+    that cannot hold their count or lie outside domain.box, broken meshes, periodic lengths
+    below the cutoff and out-of-range coordinates are reported here too.
     """
-    from pdemfem.scene import derived
-    from pdemfem.scene.loader import load_scene, scene_hash
+    from pdemfem.scene.loader import load_scene
 
     scene, base_dir = load_scene(path)
     try:
-        from pdemfem.particles.insert import insert_particles
-    except ImportError:  # an engine without insertion: validate the schema only
-        insert_particles = None
-    if insert_particles is not None:
-        try:
-            inserted = insert_particles(scene)
-        except SceneError as error:
-            raise _name_the_file(error, path) from None
-        placed = len(inserted.radii)
-    else:
-        placed = None
+        placed = _validate_as_run(scene, base_dir)
+    except SceneError as error:
+        raise _name_the_file(error, path) from None
+    try:
+        return _report(path, scene, base_dir, placed)
+    except (OverflowError, ZeroDivisionError, FloatingPointError) as error:
+        # The schema's bounds cannot catch every combination of extreme values (a modulus near
+        # the float64 limit, ...); report it as the scene's fault, not with a traceback.
+        raise SceneError(str(path), f"the scene's numbers are out of range for the derived quantities ({error})",
+                         "check the magnitudes and units of the moduli, densities, radii and coordinates") from None
+
+
+def _validate_as_run(scene, base_dir) -> int:
+    """What `run` reads before its first step, read the same way: the insertion, the mesh-wall
+    files, and the checks that relate them (coordinates, domain.box, periodic lengths).
+    Returns the number of particles placed."""
+    from pdemfem.particles.insert import insert_particles
+    from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
+    from pdemfem.walls.mesh import build_contributor_walls
+
+    validate_scene_coordinates(scene)
+    inserted = insert_particles(scene)
+    walls = build_contributor_walls(scene, base_dir, list(scene.materials))
+    validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in walls if hasattr(wall, "vertices")])
+    return len(inserted.radii)
+
+
+def _report(path, scene, base_dir, placed) -> tuple:
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import scene_hash
 
     counts = derived.group_counts(scene)
     total = derived.particle_count(scene)

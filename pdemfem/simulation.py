@@ -18,10 +18,12 @@ from pdemfem.contact.tables import build_contact_tables
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
 from pdemfem.io.simulation_io import SimulationIO
+from pdemfem.parallel.api_safety import collective_errors, private_communicators
 from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
+from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
 from pdemfem.scene.loader import load_scene, output_directory
 from pdemfem.walls.mesh import build_contributor_walls
 from pdemfem.walls.plane import PlaneWalls
@@ -36,8 +38,10 @@ log = logging.getLogger("pdemfem")
 class Simulation:
     """A coupled DEM(-FEM) simulation built from a validated scene."""
 
+    @collective_errors
     def __init__(self, scene, base_dir: Path, comm=None, output_dir=None, restart=None, force: bool = False):
-        self.comm = comm if comm is not None else MPI.COMM_WORLD
+        # Private duplicates of the user's communicator (pdemfem.parallel.api_safety).
+        self.comm, self.error_comm = private_communicators(comm if comm is not None else MPI.COMM_WORLD)
         self.scene = scene
         self.base_dir = Path(base_dir)
         self.output_dir = output_directory(scene, self.base_dir, output_dir)
@@ -50,7 +54,7 @@ class Simulation:
             surface.particle_system = self.particle_system
         self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt,
                                        fem_every=scene.coupling.fem_every)
-        self.io = SimulationIO(self)
+        self.io = SimulationIO(self, force=force)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
         if restart is not None:
             self.io.restore(restart, force=force)
@@ -71,6 +75,7 @@ class Simulation:
     def _build_particles(self) -> ParticleSystem:
         scene = self.scene
         tables = build_contact_tables(scene, characteristic_speed=derived.expected_impact_speed(scene))
+        validate_scene_coordinates(scene)  # before the insertion bins them (as `pdemfem check`)
         inserted = insert_particles(scene)
         group_material = np.array([tables.material_names.index(group.material) for group in scene.particles],
                                   dtype=np.int32)
@@ -103,6 +108,8 @@ class Simulation:
             for config in scene.solids if config.contact
         ]
         self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]
+        validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in self.contributor_walls
+                                            if hasattr(wall, "vertices")])  # the checks `pdemfem check` makes
         smallest_radius = float(inserted.radii.min()) if count else 1.0
         skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
         return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm,
@@ -128,6 +135,7 @@ class Simulation:
         return solids
 
     # ------------------------------------------------------------ stepping
+    @collective_errors
     def step(self, count: int = 1) -> None:
         for _ in range(int(count)):
             self.particle_system.step()
@@ -143,6 +151,7 @@ class Simulation:
     def _steps_per(self, interval: float) -> int:
         return max(1, int(round(interval / self.dt)))
 
+    @collective_errors
     def run(self, progress: bool = True) -> None:
         """Advance to time.end, writing history rows and field series every output interval and
         checkpoints every checkpoint interval.  SIGTERM/SIGUSR1 stop the run at the next stop
@@ -191,6 +200,7 @@ class Simulation:
                 bar.close()
             self.io.close()
 
+    @collective_errors
     def write_checkpoint(self):
         """Collective: write a checkpoint now (checkpoint.dir); returns its path."""
         return self.io.write_checkpoint()
