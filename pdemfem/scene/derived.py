@@ -610,7 +610,11 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
     speed, _ = impact_speed_estimate(scene)
     smallest_radius = min(group_radius_range(group)[0] for group in scene.particles)
     if speed > 0.0:
-        for limit, why in contact_step_limits(scene, speed):
+        limits = contact_step_limits(scene, speed)
+        # The binding (smallest) limit of each kind: resolution and dashpot stability.
+        binding = [min(((limit, why) for limit, why in limits if why.startswith("dashpot") == dashpot),
+                       default=None) for dashpot in (False, True)]
+        for limit, why in [choice for choice in binding if choice is not None]:
             if dt > limit * (1.0 + 1e-9):  # 1e-9: dt auto equals its binding limit up to round-off
                 if why.startswith("dashpot"):
                     found.append(
