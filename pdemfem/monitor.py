@@ -64,6 +64,11 @@ class DivergenceMonitor:
         self.smallest_radius = simulation.comm.allreduce(local, op=_min_op())
         self.wall_speed = max((derived._wall_speed(wall) for wall in scene.walls), default=0.0)
         self.energy_check_skipped = self._energy_check_skipped()
+        # A particle that moves more than the smallest radius in one step passes through others
+        # unseen; `Simulation.step` stops at once when one does (before a runaway reaches coordinates
+        # the neighbour search cannot bin).
+        if math.isfinite(self.smallest_radius):
+            simulation.runaway_speed_squared = (self.smallest_radius / simulation.dt) ** 2
         self.baseline = None
         self.checks = 0
 
@@ -135,6 +140,11 @@ class DivergenceMonitor:
                 problem = (f"tunnelling: a particle moved at {fastest:.3g} m/s: an impact of {deepest[1]} at that speed overlaps "
                            f"{deepest[0]:.2g} radii, so it passes through the thin surfaces "
                            f"{', '.join(self.thin_surfaces)} (tunnelling)")
+        if problem is None and fastest * sim.dt > self.smallest_radius:
+            problem = (f"{'the simulation diverged: ' if sim.step_count > self.baseline['step'] else ''}"
+                       f"a particle moved at {fastest:.3g} m/s, "
+                       f"{fastest * sim.dt / self.smallest_radius:.3g} radii in one step (more than the smallest "
+                       f"radius: contacts are missed)")
         if problem is None and self.energy_check_skipped is None:
             problem = self._energy_problem(energies)
         if problem is None:

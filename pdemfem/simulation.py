@@ -55,6 +55,7 @@ class Simulation:
                                        fem_every=scene.coupling.fem_every)
         self.io = SimulationIO(self)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
+        self.runaway_speed_squared = math.inf  # set by the run monitor (pdemfem.monitor) during run
         if restart is not None:
             self.io.restore(restart, force=force)
 
@@ -132,12 +133,17 @@ class Simulation:
 
     # ------------------------------------------------------------ stepping
     def step(self, count: int = 1) -> None:
+        """Advance `count` steps; during `run`, stop early when a particle outruns the monitor's
+        per-step speed limit (the check that follows then stops the run)."""
+        system = self.particle_system
         for _ in range(int(count)):
-            self.particle_system.step()
+            system.step()
             if self.solids:
                 self.coupling.after_particle_step()
             self.step_count += 1
             self.time = self.step_count * self.dt
+            if system.fastest_speed_squared > self.runaway_speed_squared:
+                break
 
     @property
     def output_interval(self) -> float:
@@ -195,6 +201,7 @@ class Simulation:
                                     self.stopped_by, step, self.time, path)
                     break
         finally:
+            self.runaway_speed_squared = math.inf
             stop.restore()
             if bar is not None:
                 bar.close()
