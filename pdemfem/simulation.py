@@ -55,7 +55,7 @@ class Simulation:
                                        fem_every=scene.coupling.fem_every)
         self.io = SimulationIO(self)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
-        self.runaway_speed_squared = math.inf  # set by the run monitor (pdemfem.monitor) during run
+        self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
         if restart is not None:
             self.io.restore(restart, force=force)
 
@@ -133,8 +133,8 @@ class Simulation:
 
     # ------------------------------------------------------------ stepping
     def step(self, count: int = 1) -> None:
-        """Advance `count` steps; during `run`, stop early when a particle outruns the monitor's
-        per-step speed limit (the check that follows then stops the run)."""
+        """Advance `count` steps; during `run`, stop early when a particle runs away (moves further
+        than the monitor's limit since the list build; the check that follows stops the run)."""
         system = self.particle_system
         for _ in range(int(count)):
             system.step()
@@ -142,7 +142,7 @@ class Simulation:
                 self.coupling.after_particle_step()
             self.step_count += 1
             self.time = self.step_count * self.dt
-            if system.fastest_speed_squared > self.runaway_speed_squared:
+            if system.largest_displacement > self.runaway_displacement:
                 break
 
     @property
@@ -201,7 +201,7 @@ class Simulation:
                                     self.stopped_by, step, self.time, path)
                     break
         finally:
-            self.runaway_speed_squared = math.inf
+            self.runaway_displacement = math.inf
             stop.restore()
             if bar is not None:
                 bar.close()

@@ -17,30 +17,21 @@ def kick(owned_count, velocities, angular_velocities, forces, torques, inverse_m
 
 @njit(cache=True)
 def drift(owned_count, positions, velocities, dt, positions_at_build):
-    """x += dt v; returns (the largest squared displacement since the last list build, the
-    largest squared speed of the step).
+    """x += dt v; returns the largest squared displacement since the last list build.
 
     A non-finite position (a blown-up particle) returns inf, so the caller rebuilds at
     once and the rebuild removes the particle before its NaN reaches the contact kernels
-    (a plain maximum would skip NaN).  The speed is what the run's tunnelling guard needs
-    (pdemfem.monitor); it costs nothing here, where every velocity is read anyway.
+    (a plain maximum would skip NaN).
     """
     largest = 0.0
-    fastest = 0.0
     for i in range(owned_count):
         displacement_squared = 0.0
-        speed_squared = 0.0
         for axis in range(3):
             positions[i, axis] += dt * velocities[i, axis]
             offset = positions[i, axis] - positions_at_build[i, axis]
             displacement_squared += offset * offset
-            speed_squared += velocities[i, axis] * velocities[i, axis]
         if not displacement_squared < np.inf:
             largest = np.inf
         elif displacement_squared > largest:
             largest = displacement_squared
-        if not speed_squared < np.inf:
-            fastest = np.inf
-        elif speed_squared > fastest:
-            fastest = speed_squared
-    return largest, fastest
+    return largest

@@ -30,6 +30,7 @@ from pdemfem.neighbors.cells import cell_grid, cell_indices
 from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import recursive_bisection
 from pdemfem.parallel.exchange import GhostExchange, migrate
+from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.integrate import drift, kick
 
 log = logging.getLogger("pdemfem")
@@ -66,7 +67,8 @@ class ParticleSystem:
         self.contact_count = 0
         self.lost_particles = 0
         self.nonfinite_particles = 0  # of lost_particles: removed because a position became inf/NaN
-        self.fastest_speed_squared = 0.0  # largest |v|^2 of a drift since the run monitor last read it
+        self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift
+        self.fastest_speed = 0.0  # largest particle speed at the last energies() call
         self.rebalances = 0
         largest_radius = float(state.radii.max()) if state.count else 0.0
         self.largest_radius = comm.allreduce(largest_radius, op=MPI.MAX)
@@ -93,21 +95,16 @@ class ParticleSystem:
         owned = state.owned_count
         kick(owned, state.velocities, state.angular_velocities, state.forces, state.torques, state.inverse_mass,
              state.inverse_inertia, self.gravity, 0.5 * dt)
-        largest_displacement_squared, fastest_squared = drift(owned, state.positions, state.velocities, dt,
-                                                              state.positions_at_build)
+        largest_displacement_squared = drift(owned, state.positions, state.velocities, dt, state.positions_at_build)
         if self.comm.size > 1:
-            # One reduction for both maxima (the speed feeds the run monitor's tunnelling guard).
-            maxima = np.array([largest_displacement_squared, fastest_squared])
-            self.comm.Allreduce(MPI.IN_PLACE, maxima, op=MPI.MAX)
-            largest_displacement_squared, fastest_squared = float(maxima[0]), float(maxima[1])
-        if fastest_squared > self.fastest_speed_squared:
-            self.fastest_speed_squared = fastest_squared
+            largest_displacement_squared = self.comm.allreduce(largest_displacement_squared, op=MPI.MAX)
+        # Read by the run monitor's runaway stop (same value on every rank).
+        self.largest_displacement = float(np.sqrt(largest_displacement_squared))
         self.walls.move(dt)
         for contributor in self.contributors:
             contributor.move(dt)
         # A pair (or particle-wall pair) can only close the skin if the two moved more than skin in sum.
-        largest_displacement = (np.sqrt(largest_displacement_squared)
-                                + self.walls.largest_displacement_since_build())
+        largest_displacement = self.largest_displacement + self.walls.largest_displacement_since_build()
         if 2.0 * largest_displacement > self.skin:
             self._rebuild()
         elif self.ghosts is not None:
@@ -296,18 +293,17 @@ class ParticleSystem:
         return self.comm.allreduce(self.state.owned_count) if self.comm.size > 1 else self.state.owned_count
 
     def energies(self) -> dict:
+        """Energies summed over the ranks.  The same pass leaves the largest particle speed over the
+        ranks in `fastest_speed` (inf when a velocity is not finite), for the run monitor."""
         state = self.state
-        owned = slice(0, state.owned_count)
-        mass = state.mass[owned]
-        velocities = state.velocities[owned]
-        spins = state.angular_velocities[owned]
-        local = np.array([
-            0.5 * float(np.sum(mass * np.einsum("ij,ij->i", velocities, velocities))),
-            0.5 * float(np.sum(np.einsum("ij,ij->i", spins, spins) / state.inverse_inertia[owned])),
-            -float(np.sum(mass * (state.positions[owned] @ self.gravity))),
-        ])
+        kinetic, rotational, potential, fastest_squared = particle_energy_sums(
+            state.owned_count, state.mass, state.velocities, state.angular_velocities, state.inverse_inertia,
+            state.positions, self.gravity)
+        local = np.array([kinetic, rotational, potential])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+            fastest_squared = self.comm.allreduce(fastest_squared, op=MPI.MAX)
+        self.fastest_speed = float(np.sqrt(fastest_squared))
         return {
             "kinetic_energy": float(local[0]),
             "rotational_energy": float(local[1]),
