@@ -382,23 +382,41 @@ def run_pile(comm, out, threshold=1.2):
 
 
 def run_lost(comm, out):
+    """Escaping particles are removed and counted during a run.  A NaN particle (as after a numerical
+    blow-up) stops the run (pdemfem.monitor: exit 3 on every rank); stepping on without the monitor,
+    the next rebuild removes and counts it."""
+    from pdemfem.errors import SolverError
+
     output_dir = str(Path(out) / f"lost_{comm.size}")
     sim = Simulation.from_dict(lost_scene(output_dir), comm=comm, output_dir=output_dir)
     total = sim.particle_count()
-    # One resting particle (id 0) goes NaN (as after a numerical blow-up).
-    state = sim.particle_system.state
-    state.velocities[np.flatnonzero(state.ids[:state.owned_count] == 0)] = np.nan
     sim.run(progress=False)
     positions = by_id(comm, sim, "positions")
     velocities = by_id(comm, sim, "velocities")
     ids = gathered(comm, sim.particles.ids)
     energies = sim.energies()
     count = sim.particle_count()
+
+    blown_dir = str(Path(out) / f"lost_nan_{comm.size}")
+    blown = Simulation.from_dict(lost_scene(blown_dir), comm=comm, output_dir=blown_dir)
+    state = blown.particle_system.state
+    state.velocities[np.flatnonzero(state.ids[:state.owned_count] == 0)] = np.nan
+    try:
+        blown.run(progress=False)
+        stopped = ""
+    except SolverError as error:
+        stopped = str(error)
+    blown.step(1)  # the drift makes the position NaN, the rebuild it forces removes the particle
+    blown_ids = gathered(comm, blown.particles.ids)
+    blown_positions = by_id(comm, blown, "positions")
     if comm.rank == 0:
         return dict(total=total, count=count, lost=sim.particle_system.lost_particles,
                     ids=np.sort(ids), finite=bool(np.all(np.isfinite(positions)) and np.all(np.isfinite(velocities))),
                     kinetic=energies["kinetic_energy"], history=str(Path(output_dir) / "history.csv"),
-                    escaping=LOST_ESCAPING)
+                    escaping=LOST_ESCAPING, stopped=np.array(stopped), blown_ids=np.sort(blown_ids),
+                    blown_lost=blown.particle_system.lost_particles,
+                    blown_nonfinite=blown.particle_system.nonfinite_particles,
+                    blown_finite=bool(np.all(np.isfinite(blown_positions))))
 
 
 def _abort_on_error(kind, value, traceback):
