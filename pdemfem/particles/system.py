@@ -21,6 +21,7 @@ so it is reordered and migrated with the particles.
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 from mpi4py import MPI
@@ -99,7 +100,7 @@ class ParticleSystem:
         if self.comm.size > 1:
             largest_displacement_squared = self.comm.allreduce(largest_displacement_squared, op=MPI.MAX)
         # Read by the run monitor's runaway stop (same value on every rank).
-        self.largest_displacement = float(np.sqrt(largest_displacement_squared))
+        self.largest_displacement = math.sqrt(largest_displacement_squared)
         self.walls.move(dt)
         for contributor in self.contributors:
             contributor.move(dt)
