@@ -357,7 +357,7 @@ def check_report(path: str) -> tuple:
     if total:
         speed, how = derived.impact_speed_estimate(scene)
         lines.append(f"impact speed: {speed:.3g} m/s ({how})")
-        if speed > 0:
+        if 0.0 < speed < float("inf"):  # an overflowing initial velocity is a warning (derived.warnings)
             durations = derived.contact_duration(scene, speed)
             parts = []
             for label, value in (("particle-particle", durations.particle_particle),

@@ -143,6 +143,10 @@ def test_sphere_started_behind_a_plane_stops_at_step_0(capsys, workdir):
 def test_overflowing_velocity_stops_with_explicit_dt_and_is_refused_with_dt_auto(capsys, workdir):
     code, _, err = run_cli(capsys, workdir, OVERFLOW.replace("DT", "2.0e-5"))
     assert code == 3, err
+    # check warns instead of dividing by the zero contact duration (it raised ZeroDivisionError)
+    code = cli.main(["check", str(workdir / "scene.yaml")])
+    out, check_err = capsys.readouterr()
+    assert code == 0 and "the impact speed is inf m/s" in out, (out, check_err)
     assert "non-finite energies (kinetic_energy)" in err
     assert "infinite or NaN velocity" in err
     # dt auto cannot resolve contacts at an infinite impact speed: a scene error (exit 2), no output.

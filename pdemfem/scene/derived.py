@@ -609,6 +609,10 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
         )
     speed, _ = impact_speed_estimate(scene)
     smallest_radius = min(group_radius_range(group)[0] for group in scene.particles)
+    if not math.isfinite(speed):
+        found.append(f"the impact speed is {speed:g} m/s: an initial velocity's square overflows; the run stops "
+                     f"at once (non-finite energy): check the particles' initial velocities")
+        return found
     if speed > 0.0:
         limits = contact_step_limits(scene, speed)
         # The binding (smallest) limit of each kind: resolution and dashpot stability.
