@@ -91,6 +91,8 @@ class DivergenceMonitor:
         overlapping, so any overlap energy at the start is a particle placed inside a wall or a
         solid, which the contact would release as a kick."""
         self._take_baseline(self.sim.energies(), fresh=self.sim.step_count == 0)
+        if self.energy_check_skipped is not None and self.sim.comm.rank == 0:
+            log.info("run monitor: no energy test (%s); the other tests apply", self.energy_check_skipped)
         self.check()
 
     def _take_baseline(self, energies: dict, fresh: bool = False) -> None:
