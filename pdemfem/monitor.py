@@ -1,25 +1,28 @@
 """Run-time guard: stop a diverging run, with a diagnosis, before it writes garbage to the end.
 
-`pdemfem run` calls `DivergenceMonitor.check()` at every output step and every stop check
-(at most every STOP_CHECK_EVERY steps), on all ranks together.  It reads quantities the
-step has already reduced over the ranks (the energies of a history row, the lost-particle
-counts, the largest speed the drift kernel saw), so every rank takes the same decision.
-Three tests, each a statement of physics (docs/stability_guards.md lists them):
+`pdemfem run` calls `DivergenceMonitor.check()` before the first step, at every output step
+and at every stop check (at most every STOP_CHECK_EVERY steps), on all ranks together.  It
+reads quantities reduced over the ranks (the energies of a history row and the largest speed,
+from one pass; the lost-particle counts), so every rank takes the same decision.  Each test is a
+statement of physics (docs/stability_guards.md lists them):
 
 1. Non-finite: an energy that is inf/NaN, or a particle removed because its position
    became inf/NaN.
-2. Energy created: the bookkeeping total (kinetic + rotational + potential + elastic +
+2. Tunnelling: mesh walls and the solids' contact surfaces have no thickness; a particle
+   moving more than TUNNEL_TRAVEL of the smallest radius per step relative to them can
+   cross one before a contact force builds up, and one whose impact would overlap more than
+   its radius passes whatever the step.
+3. Runaway: a particle moving more than the smallest radius in one step misses its contacts
+   (`Simulation.step` stops at once on the displacement the step computes anyway).
+4. Energy created: the bookkeeping total (kinetic + rotational + potential + elastic +
    dissipated - wall work + the solids' kinetic, strain and load potential) is conserved
    by the equations; a stable explicit step errs by a fraction of the energy that moves.
    The run stops when the total has grown by more than all the energy the scene has had
    available since the baseline: its kinetic, rotational, elastic and solid energies at
    the baseline, the largest drop of its potentials seen since, and the work moving walls
    did.  An integration that creates more energy than the scene ever had is diverging.
-3. Tunnelling: mesh walls and the solids' contact surfaces have no thickness; a particle
-   moving more than TUNNEL_TRAVEL of the smallest radius per step relative to them can
-   cross one before a contact force builds up.
 
-Scenes whose bookkeeping cannot be closed skip test 2 (and say so once): solids with a
+Scenes whose bookkeeping cannot be closed skip test 4 (logged once): solids with a
 prescribed velocity or displacement (their work is not tracked), and gravity along a
 periodic axis (a wrapped particle's potential jumps by m g L).
 """
@@ -125,14 +128,14 @@ class DivergenceMonitor:
         fastest = system.fastest_speed  # from the energies() pass above
         travel = (fastest + self.wall_speed) * sim.dt
         if problem is None and self.thin_surfaces and travel > derived.TUNNEL_TRAVEL * self.smallest_radius:
-            problem = (f"tunnelling: a particle moved at {fastest:.3g} m/s, {travel / self.smallest_radius:.2f} radii per step "
-                       f"relative to the thin surfaces {', '.join(self.thin_surfaces)} (want <= "
+            problem = (f"tunnelling: a particle moved at {fastest:.3g} m/s, {travel / self.smallest_radius:.2f} "
+                       f"radii per step relative to the thin surfaces {', '.join(self.thin_surfaces)} (want <= "
                        f"{derived.TUNNEL_TRAVEL}): it can pass through them (tunnelling)")
         if problem is None and self.thin_surfaces and math.isfinite(fastest):
             deepest = max(derived.thin_surface_overlaps(sim.scene, fastest + self.wall_speed), default=None)
             if deepest is not None and deepest[0] > 1.0:
-                problem = (f"tunnelling: a particle moved at {fastest:.3g} m/s: an impact of {deepest[1]} at that speed overlaps "
-                           f"{deepest[0]:.2g} radii, so it passes through the thin surfaces "
+                problem = (f"tunnelling: a particle moved at {fastest:.3g} m/s: an impact of {deepest[1]} at that "
+                           f"speed overlaps {deepest[0]:.2g} radii, so it passes through the thin surfaces "
                            f"{', '.join(self.thin_surfaces)} (tunnelling)")
         if problem is None and (fastest * sim.dt > self.smallest_radius
                                 or system.largest_displacement > sim.runaway_displacement):
@@ -161,8 +164,9 @@ class DivergenceMonitor:
         created = total_energy(energies) - baseline["total"]
         floor = ROUND_OFF * max(baseline["magnitude"], sum(abs(value) for value in energies.values()))
         if created > available + floor:
-            return (f"the simulation diverged: the energy total grew by {created:.3g} J, more than the {available:.3g} J of kinetic, elastic "
-                    f"and potential energy and wall work the scene had available since step {baseline['step']}")
+            return (f"the simulation diverged: the energy total grew by {created:.3g} J, more than the "
+                    f"{available:.3g} J of kinetic, elastic and potential energy and wall work the scene had "
+                    f"available since step {baseline['step']}")
         return None
 
     # ------------------------------------------------------------------ diagnosis
@@ -203,13 +207,7 @@ def likely_causes(scene, dt: float, fastest: float, smallest_radius: float, thin
     if not causes:
         causes.append("none of the known limits is exceeded at the expected impact speed: lower time.dt or "
                       "time.dt_factor, set time.expected_impact_speed, and check the run with `pdemfem check`")
-    return causes
-
-
-def _max_op():
-    from mpi4py import MPI
-
-    return MPI.MAX
+    return list(dict.fromkeys(causes))  # one line per cause, however many walls share it
 
 
 def _min_op():

@@ -198,7 +198,8 @@ def _tunnelling_scene(folder: Path, surface: str, dt: str, youngs_modulus: str, 
                      file_format="gmsh22", binary=True)
         sheet = "walls:\n  - {name: sheet, kind: mesh, file: sheet.msh, material: steel}\n"
     else:
-        sheet = ("solids:\n  - name: plate\n    mesh: {box: [[-0.02, -0.02, 0], [0.02, 0.02, 0.002]], cells: [2, 2, 1]}\n"
+        sheet = ("solids:\n  - name: plate\n"
+                 "    mesh: {box: [[-0.02, -0.02, 0], [0.02, 0.02, 0.002]], cells: [2, 2, 1]}\n"
                  "    material: steel\n    fixed: [xmin, xmax]\n    contact: [zmax, zmin]\n")
     return f"""\
 time: {{end: 3.0e-4, dt: {dt}}}
@@ -281,8 +282,8 @@ def test_divergence_under_mpi_stops_every_rank_with_exit_3_and_one_message(workd
     path = workdir / "scene.yaml"
     path.write_text(COARSE_BEADS)
     command = mpiexec_command(2, [sys.executable, "-m", "pdemfem.cli", "run", str(path), "--quiet"])
-    completed = subprocess.run(command, env=dict(process_environment(), PYTHONFAULTHANDLER="1"), cwd=workdir, capture_output=True, text=True,
-                               timeout=180)
+    environment = dict(process_environment(), PYTHONFAULTHANDLER="1")  # a crash shows where, not just 139
+    completed = subprocess.run(command, env=environment, cwd=workdir, capture_output=True, text=True, timeout=180)
     assert completed.returncode == 3, completed.stderr
     assert completed.stderr.count("error: ") == 1, completed.stderr
     assert "the simulation diverged" in completed.stderr and "Traceback" not in completed.stderr

@@ -240,11 +240,13 @@ def time_step_choice(scene: Scene, solid_critical_step: Optional[float] = None) 
             if not scene.solids else 'dt "auto" without particles needs the solids\' critical step',
             "give time.dt in seconds",
         )
-    choices = [(scene.time.dt_factor * rayleigh, f"dt_factor {scene.time.dt_factor:g} x Rayleigh time {rayleigh:.3g} s")]
+    choices = [(scene.time.dt_factor * rayleigh,
+                f"dt_factor {scene.time.dt_factor:g} x Rayleigh time {rayleigh:.3g} s")]
     speed = expected_impact_speed(scene)
     if not math.isfinite(speed):
         raise SceneError("time.dt", f'dt "auto" cannot resolve contacts at the impact speed {speed:g} m/s',
-                         "check the particles' initial velocities (their squares overflow) and time.expected_impact_speed")
+                         "check the particles' initial velocities (their squares overflow) and "
+                         "time.expected_impact_speed")
     choices += contact_step_limits(scene, speed)
     dt, why = min(choices, key=lambda choice: choice[0])
     if not (dt > 0.0 and math.isfinite(dt)):
@@ -604,8 +606,9 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
     rayleigh = rayleigh_time(scene)
     if scene.time.dt != "auto" and rayleigh is not None and dt > RAYLEIGH_LIMIT * rayleigh:
         found.append(
-            f"time.dt = {dt:.3g} s is {dt / rayleigh:.2f} x the Rayleigh time {rayleigh:.3g} s; above ~{RAYLEIGH_LIMIT} "
-            f"the explicit integration may be unstable (use dt: auto, or dt <= {0.2 * rayleigh:.3g} s)"
+            f"time.dt = {dt:.3g} s is {dt / rayleigh:.2f} x the Rayleigh time {rayleigh:.3g} s; "
+            f"above ~{RAYLEIGH_LIMIT} the explicit integration may be unstable (use dt: auto, or "
+            f"dt <= {0.2 * rayleigh:.3g} s)"
         )
     speed, _ = impact_speed_estimate(scene)
     smallest_radius = min(group_radius_range(group)[0] for group in scene.particles)
