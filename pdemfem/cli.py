@@ -296,6 +296,11 @@ def _command_run(arguments, comm) -> int:
         dt = getattr(simulation, "dt", None) or derived.time_step(scene)
         _say(comm, f"pdemfem run {arguments.scene}: {count} particles on {comm.size} rank(s), "
                    f"dt = {dt:.3g} s, end = {scene.time.end:g} s, output: {output_dir}")
+    # The warnings of `pdemfem check`, before the first step (stderr, also with --quiet).
+    if comm.rank == 0:
+        solid_step = simulation.dt if simulation.solids and not scene.particles else None
+        for warning in derived.warnings(scene, solid_critical_step=solid_step):
+            print(f"warning: {warning}", file=sys.stderr, flush=True)
     simulation.run(progress=not arguments.quiet)
     _say(comm, f"results: {output_dir}", arguments.quiet)
     return 0
@@ -385,9 +390,10 @@ def _report(path, scene, base_dir, placed) -> tuple:
     lines.append(f"materials: {', '.join(scene.materials)}; contact models: {', '.join(models)}")
 
     rayleigh = derived.rayleigh_time(scene)
-    dt = derived.time_step(scene)
+    dt = derived.time_step(scene, base_dir=base_dir)
     if scene.time.dt == "auto":
-        lines.append(f"time step: dt = {dt:.3g} s (auto: dt_factor {scene.time.dt_factor:g} x Rayleigh time {rayleigh:.3g} s)")
+        solid_step = dt if not scene.particles else None
+        lines.append(f"time step: dt = {dt:.3g} s (auto: {derived.time_step_choice(scene, solid_step)[1]})")
     else:
         rayleigh_text = f" = {dt / rayleigh:.3g} x Rayleigh time {rayleigh:.3g} s" if rayleigh else ""
         lines.append(f"time step: dt = {dt:.3g} s (given{rayleigh_text})")
@@ -396,7 +402,7 @@ def _report(path, scene, base_dir, placed) -> tuple:
     if total:
         speed, how = derived.impact_speed_estimate(scene)
         lines.append(f"impact speed: {speed:.3g} m/s ({how})")
-        if speed > 0:
+        if 0.0 < speed < float("inf"):  # an overflowing initial velocity is a warning (derived.warnings)
             durations = derived.contact_duration(scene, speed)
             parts = []
             for label, value in (("particle-particle", durations.particle_particle),
@@ -409,12 +415,12 @@ def _report(path, scene, base_dir, placed) -> tuple:
             else:
                 lines.append(f"contact duration at {speed:.3g} m/s: {', '.join(parts)}; "
                              f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact; "
-                             f"want >= {derived.DT_PER_CONTACT:.0f})")
+                             f"want >= {derived.required_steps_per_contact(scene):.0f})")
         memory = derived.memory_estimate_bytes(scene)
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({derived.BYTES_PER_PARTICLE} B/particle, "
                      f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
         lines.append(f"work: {total * steps:.3g} particle-steps")
-    found = derived.warnings(scene)
+    found = derived.warnings(scene, solid_critical_step=dt if scene.solids and not scene.particles else None)
     if scene.solids:
         from pdemfem.coupling.check import coupling_report
 

@@ -17,7 +17,9 @@ from mpi4py import MPI
 from pdemfem.contact.tables import build_contact_tables
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
+from pdemfem.errors import SolverError
 from pdemfem.io.simulation_io import SimulationIO
+from pdemfem.monitor import DivergenceMonitor
 from pdemfem.parallel.api_safety import collective_errors, private_communicators
 from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.state import ParticleState
@@ -45,10 +47,13 @@ class Simulation:
         self.scene = scene
         self.base_dir = Path(base_dir)
         self.output_dir = output_directory(scene, self.base_dir, output_dir)
-        self.dt = float(derived.time_step(scene))
+        self.solids = self._build_solids()
+        # dt "auto" without particles takes the solids' FE critical step (collective).
+        solid_step = (min(solid.critical_time_step() for solid in self.solids.values())
+                      if self.solids and not scene.particles else None)
+        self.dt = float(derived.time_step(scene, solid_critical_step=solid_step))
         self.time = 0.0
         self.step_count = 0
-        self.solids = self._build_solids()
         self.particle_system = self._build_particles()
         for surface in self.coupled_surfaces:
             surface.particle_system = self.particle_system
@@ -56,6 +61,7 @@ class Simulation:
                                        fem_every=scene.coupling.fem_every)
         self.io = SimulationIO(self, force=force)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
+        self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
         if restart is not None:
             self.io.restore(restart, force=force)
 
@@ -137,12 +143,17 @@ class Simulation:
     # ------------------------------------------------------------ stepping
     @collective_errors
     def step(self, count: int = 1) -> None:
+        """Advance `count` steps; during `run`, stop early when a particle runs away (moves further
+        than the monitor's limit since the list build; the check that follows stops the run)."""
+        system = self.particle_system
         for _ in range(int(count)):
-            self.particle_system.step()
+            system.step()
             if self.solids:
                 self.coupling.after_particle_step()
             self.step_count += 1
             self.time = self.step_count * self.dt
+            if system.largest_displacement > self.runaway_displacement:
+                break
 
     @property
     def output_interval(self) -> float:
@@ -156,7 +167,10 @@ class Simulation:
         """Advance to time.end, writing history rows and field series every output interval and
         checkpoints every checkpoint interval.  SIGTERM/SIGUSR1 stop the run at the next stop
         check (every STOP_CHECK_EVERY steps, all ranks at the same step) with one final
-        output step and checkpoint; `stopped_by` then names the signal."""
+        output step and checkpoint; `stopped_by` then names the signal.  A divergence found by
+        the run monitor (pdemfem.monitor, checked at the same points) writes the output step, a
+        checkpoint when checkpoint.every is set, and raises SolverError (exit 3) naming the likely
+        cause; `stopped_by` is then "divergence"."""
         from pdemfem.io.signals import STOP_CHECK_EVERY, StopRequest
 
         end = self.scene.time.end
@@ -169,7 +183,9 @@ class Simulation:
             self.io.write_output()
         bar = _progress_bar(total_steps, self.step_count, progress and self.comm.rank == 0)
         stop = StopRequest()
+        monitor = DivergenceMonitor(self)
         try:
+            self._guarded(monitor.start)
             while self.step_count < total_steps:
                 step = self.step_count
                 targets = [total_steps, (step // steps_per_output + 1) * steps_per_output,
@@ -177,6 +193,7 @@ class Simulation:
                 if steps_per_checkpoint:
                     targets.append((step // steps_per_checkpoint + 1) * steps_per_checkpoint)
                 self.step(min(targets) - step)
+                self._guarded(monitor.check)
                 step = self.step_count
                 at_end = step == total_steps
                 if step % steps_per_output == 0 or at_end:
@@ -195,10 +212,23 @@ class Simulation:
                                     self.stopped_by, step, self.time, path)
                     break
         finally:
+            self.runaway_displacement = math.inf
             stop.restore()
             if bar is not None:
                 bar.close()
             self.io.close()
+
+    def _guarded(self, check) -> None:
+        """Run a monitor check (collective); on divergence write the output step, and a checkpoint when
+        checkpoints are on, then re-raise the SolverError (exit 3) on every rank."""
+        try:
+            check()
+        except SolverError:
+            self.stopped_by = "divergence"
+            self.io.write_output()
+            if self.scene.checkpoint.every:
+                self.io.write_checkpoint()
+            raise
 
     @collective_errors
     def write_checkpoint(self):
