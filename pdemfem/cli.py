@@ -297,9 +297,14 @@ def _command_run(arguments, comm) -> int:
         _say(comm, f"pdemfem run {arguments.scene}: {count} particles on {comm.size} rank(s), "
                    f"dt = {dt:.3g} s, end = {scene.time.end:g} s, output: {output_dir}")
     # The warnings of `pdemfem check`, before the first step (stderr, also with --quiet).
+    solid_step = simulation.dt if simulation.solids and not scene.particles else None
+    found = derived.warnings(scene, solid_critical_step=solid_step)
+    if simulation.solids:
+        from pdemfem.coupling.check import coupling_warnings
+
+        found += coupling_warnings(scene, simulation.solids, simulation.dt)  # collective
     if comm.rank == 0:
-        solid_step = simulation.dt if simulation.solids and not scene.particles else None
-        for warning in derived.warnings(scene, solid_critical_step=solid_step):
+        for warning in found:
             print(f"warning: {warning}", file=sys.stderr, flush=True)
     simulation.run(progress=not arguments.quiet)
     _say(comm, f"results: {output_dir}", arguments.quiet)

@@ -4,7 +4,7 @@
 and at every stop check (at most every STOP_CHECK_EVERY steps), on all ranks together.  It
 reads quantities reduced over the ranks (the energies of a history row and the largest speed,
 from one pass; the lost-particle counts), so every rank takes the same decision.  Each test is a
-statement of physics (docs/stability_guards.md lists them):
+statement of physics (docs/stability.md lists them):
 
 1. Non-finite: an energy that is inf/NaN, or a particle removed because its position
    became inf/NaN.

@@ -39,3 +39,23 @@ def test_resting_sphere_neither_gains_energy_nor_shakes_the_block(tmp_path, name
     speeds = result["largest_nodal_speed"]
     assert speeds[-1] <= speeds[0], (name, speeds)
     assert all(abs(ratio - 1.0) <= 0.01 for ratio in result["overlap_ratio"]), (name, result["overlap_ratio"])
+
+
+def test_check_and_run_warn_when_the_held_contact_force_can_overshoot_a_yielding_surface(tmp_path):
+    """A soft block (E = 1e6, lightest surface node ~4 g at 16 cells) under the heavy sphere with a long
+    interval (fem_every 50 x 2e-4 s): S_n h^2 / (4 m) >> 1 and S_n / (E l) > 0.1, so check must warn
+    and name the largest interval; the steel block of the map stays silent (S_n / (E l) ~ 7e-5)."""
+    import yaml
+
+    from pdemfem.cli import check_report
+
+    soft = resting_scene(16, fem_every=50)
+    soft["materials"]["steel"]["youngs_modulus"] = 1e6
+    steel = resting_scene(16, fem_every=50)
+    for name, scene in (("soft", soft), ("steel", steel)):
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(scene))
+        lines, warnings = check_report(str(path))
+        assert any(line.startswith("solid block: contact vs surface nodes") for line in lines)
+        overshoot = [w for w in warnings if "can overshoot its lightest surface node" in w]
+        assert len(overshoot) == (1 if name == "soft" else 0), (name, warnings)

@@ -47,11 +47,14 @@ def _contact_figures(scene, config, solid, interval: float, warnings) -> list:
     from pdemfem.contact.restitution import normal_damping_coefficient
     from pdemfem.scene import derived
 
+    from mpi4py import MPI
+
     surface = solid.contact_surface()
-    nodes = np.asarray(surface.node_indices) - solid.global_node_range[0]
-    masses = solid.lumped_mass.getArray(readonly=True).reshape(-1, 3)[nodes, 0]
-    node_mass = float(masses.min())
-    positions = solid.mesh.points[nodes]
+    indices, positions, _ = solid.surface_state()  # collective: every rank gets all surface nodes
+    start, end = solid.global_node_range
+    owned = (indices >= start) & (indices < end)
+    masses = solid.lumped_mass.getArray(readonly=True).reshape(-1, 3)[np.asarray(indices[owned]) - start, 0]
+    node_mass = solid.comm.allreduce(float(masses.min()) if len(masses) else math.inf, op=MPI.MIN)
     triangles = np.asarray(surface.triangles)
     edges = np.linalg.norm(positions[triangles] - positions[np.roll(triangles, 1, axis=1)], axis=2)
     element_size = float(np.median(edges))
@@ -85,3 +88,13 @@ def _contact_figures(scene, config, solid, interval: float, warnings) -> list:
             f"to the contact (S_n/(E l) = {compliance:.3g} > {SURFACE_COMPLIANCE_LIMIT:g}); make the interval "
             f"fem_every x dt <= {limit:.3g} s (lower fem_every, then dt) or coarsen the contact surface's mesh")
     return lines
+
+
+def coupling_warnings(scene, solids: dict, dt: float) -> list:
+    """Collective: the coupled-stability warnings of `pdemfem check` for already built solids (run)."""
+    found = []
+    interval = scene.coupling.fem_every * dt
+    for config in scene.solids:
+        if config.contact and scene.particles:
+            _contact_figures(scene, config, solids[config.name], interval, found)
+    return found

@@ -53,7 +53,7 @@ DT_PER_CONTACT = 30.0
 # Steps per contact for a 1 % restitution error: STEPS_PER_DAMPING * gamma_lin^1.5 (gamma_lin: the
 # calibrated damping as the linear law's coefficient).  Measured: the mean error over the touch phase
 # falls as 1/N; its 1 % crossing is at 72 gamma^1.5 (e = 0.1), 75 (0.2), 64 (0.5) for the linear law
-# and 55-61 for Hertz (docs/stability_guards.md has the table); 80 keeps the largest, 75, 6 % inside.
+# and 55-61 for Hertz (docs/stability.md has the table); 80 keeps the largest, 75, 6 % inside.
 STEPS_PER_DAMPING = 80.0
 # Below this restitution the step is that of e = 0.1: the relative error then grows, but the
 # absolute error e_obtained - e stays below 1 % of 0.1 (it falls as e^(1/4) at a fixed step).
@@ -143,7 +143,7 @@ def steps_per_contact_required(model: str, restitution: float) -> float:
 
     The error of a resolved contact is first order in dt (the dashpot acts for a whole step at
     the first touch and the last one), so it falls as 1/N; STEPS_PER_DAMPING is the measured
-    1 % crossing (docs/stability_guards.md)."""
+    1 % crossing (docs/stability.md)."""
     gamma = linear_equivalent_damping(model, max(restitution, RESTITUTION_ACCURACY_FLOOR))
     return max(DT_PER_CONTACT, STEPS_PER_DAMPING * gamma**1.5)
 
