@@ -275,7 +275,7 @@ def central_difference_update(u, v, acceleration, internal, base_load, nodal_loa
 
 
 @njit(cache=True)
-def apply_contact_dampers(u, v, acceleration, lumped_mass, constrained, damped_nodes, dampers, dt, gain):
+def apply_contact_dampers(u, v, acceleration, lumped_mass, constrained, damped_nodes, dampers, dt, decay, gain):
     """Implicit nodal dashpots of particle contacts, after a central-difference step (flat dof arrays).
 
     dampers[k] = (D_xx, D_yy, D_zz, D_yz, D_xz, D_xy, g_x, g_y, g_z) for owned node damped_nodes[k]: the
@@ -284,7 +284,10 @@ def apply_contact_dampers(u, v, acceleration, lumped_mass, constrained, damped_n
     dashpot held constant over the interval), and u moves by dt (v - v*) more.  Constrained dofs keep
     their prescribed velocity.  m is the lumped (row-sum) mass, also with consistent mass (an operator
     split that conserves momentum, since the consistent mass rows sum to the lumped one).
-    Returns the dashpots' work on the nodes, sum 1/2 m (v^2 - v*^2) (this rank's nodes).
+    Returns the dashpots' work on the nodes (this rank's), booked as the external work of the step is:
+    the impulse m (v - v*) times the midpoint dt (v- + v)/2 of the step's displacement increments, v- the
+    velocity before the step (v* = decay v- + gain dt a).  (Booking 1/2 m (v^2 - v*^2), the kinetic energy
+    the split removes, would miss the strain energy the extra displacement dt (v - v*) exchanges.)
     """
     work = 0.0
     matrix = np.empty((3, 3))
@@ -330,7 +333,8 @@ def apply_contact_dampers(u, v, acceleration, lumped_mass, constrained, damped_n
             if constrained[dof]:
                 continue
             change = rhs[r] - v[dof]
-            work += 0.5 * lumped_mass[dof] * change * (rhs[r] + v[dof])
+            before = (v[dof] - gain * dt * acceleration[dof]) / decay
+            work += lumped_mass[dof] * change * 0.5 * (before + rhs[r])
             u[dof] += dt * change
             acceleration[dof] += change / (gain * dt)
             v[dof] = rhs[r]

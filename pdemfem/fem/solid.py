@@ -350,7 +350,7 @@ class Solid:
         if len(self._damped_nodes):
             self.damper_work_local += kernels.apply_contact_dampers(
                 self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
-                self._lumped_mass_values, self._constrained, self._damped_nodes, self._dampers, dt, gain)
+                self._lumped_mass_values, self._constrained, self._damped_nodes, self._dampers, dt, decay, gain)
         self.external_work += _sum(self.comm, work)
         self.time += dt
         self.step_count += 1
