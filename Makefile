@@ -14,7 +14,7 @@ install:
 	@bash scripts/install.sh
 
 demo: install
-	@$(RUN) -n $(DEMO_RANKS) -- $(PYTHON) -m pdemfem.cli run $(DEMO_SCENE) -o $(DEMO_OUT)
+	@$(RUN) -n $(DEMO_RANKS) -- $(PYTHON) -m pdemfem.cli run $(DEMO_SCENE) -o $(DEMO_OUT) --force
 	@$(RUN) -- $(PYTHON) -m pdemfem.cli plot $(DEMO_OUT) --quiet
 	@echo "demo results: $(DEMO_OUT)/ (history.csv, plots/*.png, particles.xdmf and plate.xdmf for ParaView)"
 

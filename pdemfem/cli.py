@@ -2,7 +2,7 @@
 
     pdemfem run scene.yaml [-o DIR] [--quiet] [--restart FILE] [--force] [-fem_<option> [value] ...]
         (-fem_* arguments go to PETSc's options database: the FE solvers' prefixes fem_ and fem_mass_)
-    pdemfem check scene.yaml [--strict]
+    pdemfem check scene.yaml [--strict]     (reads and checks everything `run` reads before its first step)
     pdemfem info
     pdemfem plot OUTDIR [--quiet]
 
@@ -18,6 +18,9 @@ runs the same command.  Errors:
   calls ``MPI.COMM_WORLD.Abort(1)``, so no rank waits forever.
 * nothing is created on disk before the scene is validated and built; an output
   directory a failed `run` created during set-up is removed again.
+* an output directory holding an earlier run's results is refused (exit 2) unless
+  --force (start afresh) or --restart; checkpoints a run did not write are never
+  deleted or overwritten (pdemfem.io.output_guard).
 """
 from __future__ import annotations
 
@@ -75,8 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     run.add_argument("--restart", metavar="FILE", help="continue from a checkpoint file (or a checkpoint "
                      "directory: its latest.h5), on any number of ranks")
-    run.add_argument("--force", action="store_true", help="with --restart: accept a checkpoint written for a "
-                     "scene whose physics changed (scene hash mismatch), e.g. after a deliberate edit")
+    run.add_argument("--force", action="store_true", help="start afresh in an output directory holding an "
+                     "earlier run's results (deletes them; checkpoints are never deleted); with --restart: accept "
+                     "a checkpoint written for a scene whose physics changed (scene hash mismatch)")
     run.set_defaults(handler=_command_run)
 
     check = commands.add_parser("check", help="validate a scene and print derived quantities (dt, contact duration, memory)")
@@ -169,6 +173,10 @@ def _set_petsc_options(options) -> None:
     database = PETSc.Options()
     for name, value in options:
         database.setValue(name[1:], value if value is not None else "")
+    # PETSc's unused-options report at exit: a misspelt option (-fem_ksp_rtoll) or one no solver
+    # of this scene reads is listed ("Option left: name:-fem_ksp_rtoll ...") instead of ignored.
+    if not database.hasName("options_left"):
+        database.setValue("options_left", "")
 
 
 def _fail_together(comm, error: PdemfemError) -> int:
@@ -262,6 +270,7 @@ def _command_run(arguments, comm) -> int:
     scene, base_dir = load_scene(arguments.scene)
     output_dir = output_directory(scene, base_dir, arguments.output)
     existed = output_dir.exists()
+    _refuse_earlier_results(scene, base_dir, output_dir, arguments, comm, existed)
 
     from pdemfem.simulation import Simulation
 
@@ -287,9 +296,35 @@ def _command_run(arguments, comm) -> int:
         dt = getattr(simulation, "dt", None) or derived.time_step(scene)
         _say(comm, f"pdemfem run {arguments.scene}: {count} particles on {comm.size} rank(s), "
                    f"dt = {dt:.3g} s, end = {scene.time.end:g} s, output: {output_dir}")
+    # The warnings of `pdemfem check`, before the first step (stderr, also with --quiet).
+    solid_step = simulation.dt if simulation.solids and not scene.particles else None
+    found = derived.warnings(scene, solid_critical_step=solid_step)
+    if simulation.solids:
+        from pdemfem.coupling.check import coupling_warnings
+
+        found += coupling_warnings(scene, simulation.solids, simulation.dt)  # collective
+    if comm.rank == 0:
+        for warning in found:
+            print(f"warning: {warning}", file=sys.stderr, flush=True)
     simulation.run(progress=not arguments.quiet)
     _say(comm, f"results: {output_dir}", arguments.quiet)
     return 0
+
+
+def _refuse_earlier_results(scene, base_dir, output_dir, arguments, comm, existed: bool) -> None:
+    """Before the (possibly long) build: an output directory holding an earlier run's results is
+    refused unless --force or --restart, and both output directories must be writable.  The
+    earlier files are deleted (with --force) only when the run starts writing."""
+    from pdemfem.io.output_guard import prepare_output
+    from pdemfem.io.simulation_io import checkpoint_directory_of
+
+    try:
+        prepare_output(output_dir, checkpoint_directory_of(scene, base_dir, output_dir), comm,
+                       restart=arguments.restart is not None, force=arguments.force, clear=False)
+    except PdemfemError as error:
+        if not existed:
+            error.cleanup_dir = output_dir
+        raise
 
 
 # --------------------------------------------------------------------------- check
@@ -306,25 +341,45 @@ def _format_bytes(value: float) -> str:
 def check_report(path: str) -> tuple:
     """(lines, warnings) for `pdemfem check`; raises SceneError for an invalid scene.
 
-    Builds the insertion as a run would, so overlapping list positions and regions
-    that cannot hold their count are reported here too.
+    Reads everything a run reads before its first step (the insertion, the mesh-wall and
+    solid mesh files) and applies the same checks, so overlapping list positions, regions
+    that cannot hold their count or lie outside domain.box, broken meshes, periodic lengths
+    below the cutoff and out-of-range coordinates are reported here too.
     """
-    from pdemfem.scene import derived
-    from pdemfem.scene.loader import load_scene, scene_hash
+    from pdemfem.scene.loader import load_scene
 
     scene, base_dir = load_scene(path)
     try:
-        from pdemfem.particles.insert import insert_particles
-    except ImportError:  # an engine without insertion: validate the schema only
-        insert_particles = None
-    if insert_particles is not None:
-        try:
-            inserted = insert_particles(scene)
-        except SceneError as error:
-            raise _name_the_file(error, path) from None
-        placed = len(inserted.radii)
-    else:
-        placed = None
+        placed = _validate_as_run(scene, base_dir)
+    except SceneError as error:
+        raise _name_the_file(error, path) from None
+    try:
+        return _report(path, scene, base_dir, placed)
+    except (OverflowError, ZeroDivisionError, FloatingPointError) as error:
+        # The schema's bounds cannot catch every combination of extreme values (a modulus near
+        # the float64 limit, ...); report it as the scene's fault, not with a traceback.
+        raise SceneError(str(path), f"the scene's numbers are out of range for the derived quantities ({error})",
+                         "check the magnitudes and units of the moduli, densities, radii and coordinates") from None
+
+
+def _validate_as_run(scene, base_dir) -> int:
+    """What `run` reads before its first step, read the same way: the insertion, the mesh-wall
+    files, and the checks that relate them (coordinates, domain.box, periodic lengths).
+    Returns the number of particles placed."""
+    from pdemfem.particles.insert import insert_particles
+    from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
+    from pdemfem.walls.mesh import build_contributor_walls
+
+    validate_scene_coordinates(scene)
+    inserted = insert_particles(scene)
+    walls = build_contributor_walls(scene, base_dir, list(scene.materials))
+    validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in walls if hasattr(wall, "vertices")])
+    return len(inserted.radii)
+
+
+def _report(path, scene, base_dir, placed) -> tuple:
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import scene_hash
 
     counts = derived.group_counts(scene)
     total = derived.particle_count(scene)
@@ -340,9 +395,10 @@ def check_report(path: str) -> tuple:
     lines.append(f"materials: {', '.join(scene.materials)}; contact models: {', '.join(models)}")
 
     rayleigh = derived.rayleigh_time(scene)
-    dt = derived.time_step(scene)
+    dt = derived.time_step(scene, base_dir=base_dir)
     if scene.time.dt == "auto":
-        lines.append(f"time step: dt = {dt:.3g} s (auto: dt_factor {scene.time.dt_factor:g} x Rayleigh time {rayleigh:.3g} s)")
+        solid_step = dt if not scene.particles else None
+        lines.append(f"time step: dt = {dt:.3g} s (auto: {derived.time_step_choice(scene, solid_step)[1]})")
     else:
         rayleigh_text = f" = {dt / rayleigh:.3g} x Rayleigh time {rayleigh:.3g} s" if rayleigh else ""
         lines.append(f"time step: dt = {dt:.3g} s (given{rayleigh_text})")
@@ -351,7 +407,7 @@ def check_report(path: str) -> tuple:
     if total:
         speed, how = derived.impact_speed_estimate(scene)
         lines.append(f"impact speed: {speed:.3g} m/s ({how})")
-        if speed > 0:
+        if 0.0 < speed < float("inf"):  # an overflowing initial velocity is a warning (derived.warnings)
             durations = derived.contact_duration(scene, speed)
             parts = []
             for label, value in (("particle-particle", durations.particle_particle),
@@ -364,16 +420,16 @@ def check_report(path: str) -> tuple:
             else:
                 lines.append(f"contact duration at {speed:.3g} m/s: {', '.join(parts)}; "
                              f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact; "
-                             f"want >= {derived.DT_PER_CONTACT:.0f})")
+                             f"want >= {derived.required_steps_per_contact(scene):.0f})")
         memory = derived.memory_estimate_bytes(scene)
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({derived.BYTES_PER_PARTICLE} B/particle, "
                      f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
         lines.append(f"work: {total * steps:.3g} particle-steps")
+    found = derived.warnings(scene, solid_critical_step=dt if scene.solids and not scene.particles else None)
     if scene.solids:
         from pdemfem.coupling.check import coupling_report
 
-        lines.extend(coupling_report(scene, base_dir, dt))
-    found = derived.warnings(scene)
+        lines.extend(coupling_report(scene, base_dir, dt, warnings=found))
     return lines, found
 
 

@@ -34,6 +34,10 @@ class CheckpointError(PdemfemError):
     """A checkpoint that cannot be restarted from."""
 
 
+class OutputError(PdemfemError):
+    """An output or checkpoint location that cannot be used (exists with results, not writable, full)."""
+
+
 class SolverError(PdemfemError):
     """A numerical failure the user can act on (diverged solve, unstable step)."""
 

@@ -17,11 +17,15 @@ from mpi4py import MPI
 from pdemfem.contact.tables import build_contact_tables
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
+from pdemfem.errors import SolverError
 from pdemfem.io.simulation_io import SimulationIO
+from pdemfem.monitor import DivergenceMonitor
+from pdemfem.parallel.api_safety import collective_errors, private_communicators
 from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
+from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
 from pdemfem.scene.loader import load_scene, output_directory
 from pdemfem.walls.mesh import build_contributor_walls
 from pdemfem.walls.plane import PlaneWalls
@@ -36,20 +40,28 @@ log = logging.getLogger("pdemfem")
 class Simulation:
     """A coupled DEM(-FEM) simulation built from a validated scene."""
 
+    @collective_errors
     def __init__(self, scene, base_dir: Path, comm=None, output_dir=None, restart=None, force: bool = False):
-        self.comm = comm if comm is not None else MPI.COMM_WORLD
+        # Private duplicates of the user's communicator (pdemfem.parallel.api_safety).
+        self.comm, self.error_comm = private_communicators(comm if comm is not None else MPI.COMM_WORLD)
         self.scene = scene
         self.base_dir = Path(base_dir)
         self.output_dir = output_directory(scene, self.base_dir, output_dir)
-        self.dt = float(derived.time_step(scene))
+        self.solids = self._build_solids()
+        # dt "auto" without particles takes the solids' FE critical step (collective).
+        solid_step = (min(solid.critical_time_step() for solid in self.solids.values())
+                      if self.solids and not scene.particles else None)
+        self.dt = float(derived.time_step(scene, solid_critical_step=solid_step))
         self.time = 0.0
         self.step_count = 0
-        self.solids = self._build_solids()
         self.particle_system = self._build_particles()
+        for surface in self.coupled_surfaces:
+            surface.particle_system = self.particle_system
         self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt,
                                        fem_every=scene.coupling.fem_every)
-        self.io = SimulationIO(self)
+        self.io = SimulationIO(self, force=force)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
+        self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
         if restart is not None:
             self.io.restore(restart, force=force)
 
@@ -69,6 +81,7 @@ class Simulation:
     def _build_particles(self) -> ParticleSystem:
         scene = self.scene
         tables = build_contact_tables(scene, characteristic_speed=derived.expected_impact_speed(scene))
+        validate_scene_coordinates(scene)  # before the insertion bins them (as `pdemfem check`)
         inserted = insert_particles(scene)
         group_material = np.array([tables.material_names.index(group.material) for group in scene.particles],
                                   dtype=np.int32)
@@ -101,6 +114,8 @@ class Simulation:
             for config in scene.solids if config.contact
         ]
         self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]
+        validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in self.contributor_walls
+                                            if hasattr(wall, "vertices")])  # the checks `pdemfem check` makes
         smallest_radius = float(inserted.radii.min()) if count else 1.0
         skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
         return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm,
@@ -126,13 +141,19 @@ class Simulation:
         return solids
 
     # ------------------------------------------------------------ stepping
+    @collective_errors
     def step(self, count: int = 1) -> None:
+        """Advance `count` steps; during `run`, stop early when a particle runs away (moves further
+        than the monitor's limit since the list build; the check that follows stops the run)."""
+        system = self.particle_system
         for _ in range(int(count)):
-            self.particle_system.step()
+            system.step()
             if self.solids:
                 self.coupling.after_particle_step()
             self.step_count += 1
             self.time = self.step_count * self.dt
+            if system.largest_displacement > self.runaway_displacement:
+                break
 
     @property
     def output_interval(self) -> float:
@@ -141,11 +162,15 @@ class Simulation:
     def _steps_per(self, interval: float) -> int:
         return max(1, int(round(interval / self.dt)))
 
+    @collective_errors
     def run(self, progress: bool = True) -> None:
         """Advance to time.end, writing history rows and field series every output interval and
         checkpoints every checkpoint interval.  SIGTERM/SIGUSR1 stop the run at the next stop
         check (every STOP_CHECK_EVERY steps, all ranks at the same step) with one final
-        output step and checkpoint; `stopped_by` then names the signal."""
+        output step and checkpoint; `stopped_by` then names the signal.  A divergence found by
+        the run monitor (pdemfem.monitor, checked at the same points) writes the output step, a
+        checkpoint when checkpoint.every is set, and raises SolverError (exit 3) naming the likely
+        cause; `stopped_by` is then "divergence"."""
         from pdemfem.io.signals import STOP_CHECK_EVERY, StopRequest
 
         end = self.scene.time.end
@@ -158,7 +183,9 @@ class Simulation:
             self.io.write_output()
         bar = _progress_bar(total_steps, self.step_count, progress and self.comm.rank == 0)
         stop = StopRequest()
+        monitor = DivergenceMonitor(self)
         try:
+            self._guarded(monitor.start)
             while self.step_count < total_steps:
                 step = self.step_count
                 targets = [total_steps, (step // steps_per_output + 1) * steps_per_output,
@@ -166,6 +193,7 @@ class Simulation:
                 if steps_per_checkpoint:
                     targets.append((step // steps_per_checkpoint + 1) * steps_per_checkpoint)
                 self.step(min(targets) - step)
+                self._guarded(monitor.check)
                 step = self.step_count
                 at_end = step == total_steps
                 if step % steps_per_output == 0 or at_end:
@@ -184,11 +212,25 @@ class Simulation:
                                     self.stopped_by, step, self.time, path)
                     break
         finally:
+            self.runaway_displacement = math.inf
             stop.restore()
             if bar is not None:
                 bar.close()
             self.io.close()
 
+    def _guarded(self, check) -> None:
+        """Run a monitor check (collective); on divergence write the output step, and a checkpoint when
+        checkpoints are on, then re-raise the SolverError (exit 3) on every rank."""
+        try:
+            check()
+        except SolverError:
+            self.stopped_by = "divergence"
+            self.io.write_output()
+            if self.scene.checkpoint.every:
+                self.io.write_checkpoint()
+            raise
+
+    @collective_errors
     def write_checkpoint(self):
         """Collective: write a checkpoint now (checkpoint.dir); returns its path."""
         return self.io.write_checkpoint()
@@ -265,12 +307,23 @@ class Simulation:
         # moved by a prescription: their exchange with the particles is internal to the system).
         energies["wall_work"] += sum(wall.work for wall in self.contributor_walls
                                      if not any(wall is surface.triangle_surface for surface in self.coupled_surfaces))
+        if self.solids:
+            energies["dissipated_energy"] += self.dashpot_dissipation()
         energies["solid_kinetic_energy"] = sum(solid.kinetic_energy() for solid in self.solids.values())
         energies["solid_strain_energy"] = sum(solid.strain_energy() for solid in self.solids.values())
         # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
         energies["solid_load_potential"] = -sum(solid.constant_load_vec.dot(solid.displacement_vec)
                                                 for solid in self.solids.values())
         return energies
+
+    def dashpot_dissipation(self) -> float:
+        """Collective: energy [J] the contact dashpots on solid surfaces dissipated beyond what the contact
+        kernels booked (coupling/dampers.py): the particle-side correction minus the dashpots' work on
+        the solids' nodes; part of dissipated_energy."""
+        local = np.array([sum(surface.dissipation_correction_local for surface in self.coupled_surfaces)
+                          - sum(solid.damper_work_local for solid in self.solids.values())])
+        self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+        return float(local[0])
 
     def total_energy(self) -> float:
         """Everything the bookkeeping tracks; constant up to integration error when no work is

@@ -3,8 +3,8 @@
 * Every step (P1 and P2): the force the particles exert on the mirrored surface (the contact kernel's
   totals, which are minus the particle-side force) equals the sum of the nodal counter-forces the
   coupling spreads onto the FE nodes, and so does the moment about a point, to round-off.
-* Settled pile (P1): the plate's support reaction minus its own weight (from the static start) equals
-  the particles' weight within 0.5 %.
+* Settled pile (P1): the plate's support reaction minus its own weight (from the static start), averaged
+  over the last 500 steps, equals the particles' weight within 0.5 %.
 """
 import numpy as np
 import pytest
@@ -30,8 +30,8 @@ class TransferRecorder:
         original = CoupledSurface.collect_contact_forces
         recorder = self
 
-        def wrapped(surface):
-            original(surface)
+        def wrapped(surface, *args, **kwargs):
+            original(surface, *args, **kwargs)
             recorder.check(surface)
 
         monkeypatch.setattr(CoupledSurface, "collect_contact_forces", wrapped)
@@ -93,17 +93,25 @@ def test_settled_pile_reaction_equals_particle_weight(monkeypatch, tmp_path):
     # The static start carries the plate's own weight: subtract it (the supports see weight + grains).
     own = support_reaction(sim)
     weight = particle_weight(sim)
-    assert abs(abs(own[2]) - 2700 * 0.2 * 0.2 * 0.02 * 9.81) <= 1e-8 * abs(own[2])  # static solve rtol 1e-10
-    sim.step(11000)  # 0.44 s: the grains fall ~4 cm, pile up and settle (kinetic energy < 1e-6 J)
+    # Static solve to rtol 1e-10: K sums to zero over a translation, so reaction - plate weight = -sum of the
+    # residual's free z rows, |.| <= sqrt(n) |r| <= 1e-10 sqrt(n) |b| ~ 1e-10 W for near-uniform nodal loads
+    # (|b| ~ W / sqrt(n)); 1e-9 leaves a factor 10 for the nodal weights' spread.  Measured 1.0e-13.
+    assert abs(abs(own[2]) - 2700 * 0.2 * 0.2 * 0.02 * 9.81) <= 1e-9 * abs(own[2])
+    sim.step(10500)  # 0.42 s: the grains fall ~4 cm, pile up and settle (kinetic energy < 1e-6 J)
+    # Settled, the pile still rings on its contacts (period ~2 ms): the instantaneous reaction swings by
+    # -0.4 % .. +0.3 % of the weight over the last 500 steps (measured; up to 2.5 % 1500 steps earlier), its
+    # deviation being the grains' sum m a_z.  Averaged over those 500 steps (0.02 s, ~10 periods) the swings
+    # cancel: window means within 1.2e-3 of the weight over the last 2000 steps (measured).  0.5 % allowed.
+    window, reaction, surface = 500, np.zeros(3), 0.0
+    for _ in range(window):
+        sim.step()
+        reaction += (support_reaction(sim) - own) / window
+        surface += -sim.wall_force("plate")[2] / window
     kinetic = sim.energies()["kinetic_energy"]
-    reaction = support_reaction(sim) - own
-    # The vertical momentum balance of the grains: plate force = weight - sum m a.  With kinetic energy
-    # K, vibrations of frequency ~1/t_contact (~3e3 rad/s) have sum m|a| <~ omega sqrt(2 K M): at
-    # K = 1e-6 J, M = 0.27 kg that is 2e-3 N, under 0.1 % of the weight; so 0.5 % holds once settled.
-    print(f"settled pile: kinetic {kinetic:.3g} J, reaction {reaction[2]:.6g} N, weight {weight:.6g} N, "
+    print(f"settled pile: kinetic {kinetic:.3g} J, mean reaction {reaction[2]:.6g} N, weight {weight:.6g} N, "
           f"relative {(reaction[2] - weight) / weight:+.3g}")
     assert kinetic < 1e-6
     assert abs(reaction[2] - weight) <= 5e-3 * weight, (reaction, weight)   # sign: supports push up
     # The frictionless side walls carry no vertical force, so the plate's surface force is the weight too.
-    assert abs(-sim.wall_force("plate")[2] - weight) <= 5e-3 * weight
+    assert abs(surface - weight) <= 5e-3 * weight
     assert recorder.worst_force <= 1.0 and recorder.worst_moment <= 1.0

@@ -17,12 +17,13 @@ G = 9.81
 TOP = 0.5
 
 
-def damped_hertz_pulse(gamma: float, gravity: float) -> float:
-    """Dimensionless duration of the contact force pulse of the kernel's clamped damped Hertz law
-    (restitution.py) with gravity: x'' = -max(0, x^1.5 + sqrt(1.5) gamma x^0.25 x') + gravity, x(0) = 0,
-    x'(0) = 1, in units of L / v0 with L = (m v0^2 / k)^(2/5) and gravity = g L / v0^2.  The pulse ends
-    when the clamped force reaches zero (the ball then leaves, the overlap shrinking at constant rate).
-    RK4 with h = 1e-4 (error ~h^4); the end is interpolated linearly between steps."""
+def damped_hertz_pulse(gamma: float, gravity: float) -> tuple:
+    """Dimensionless (duration, peak force, time of the peak) of the contact force pulse of the kernel's clamped damped Hertz
+    law (restitution.py) with gravity: x'' = -max(0, x^1.5 + sqrt(1.5) gamma x^0.25 x') + gravity, x(0) = 0,
+    x'(0) = 1, in units of L / v0 and m v0^2 / L with L = (m v0^2 / k)^(2/5) and gravity = g L / v0^2.  The
+    pulse ends when the clamped force reaches zero (the ball then leaves, the overlap shrinking at constant
+    rate).  RK4 with h = 1e-4 (error ~h^4; the peak force agrees with h = 1e-5 to 1e-6); the end is
+    interpolated linearly between steps."""
     root = math.sqrt(1.5) * gamma
 
     def force(x, v):
@@ -33,7 +34,7 @@ def damped_hertz_pulse(gamma: float, gravity: float) -> float:
         return -max(0.0, force(x, v)) + gravity
 
     h, t, x, v = 1e-4, 0.0, 0.0, 1.0
-    previous = None
+    previous, peak, peak_time = None, 0.0, 0.0
     while True:
         k1x, k1v = v, accel(x, v)
         k2x, k2v = v + 0.5 * h * k1v, accel(x + 0.5 * h * k1x, v + 0.5 * h * k1v)
@@ -43,8 +44,10 @@ def damped_hertz_pulse(gamma: float, gravity: float) -> float:
         v = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
         t += h
         f = force(x, v)
+        if f > peak:
+            peak, peak_time = f, t
         if t > 0.1 and (f <= 0.0 or x <= 0.0):
-            return t - h * (-f) / (previous - f) if f <= 0.0 < previous else t
+            return (t - h * (-f) / (previous - f) if f <= 0.0 < previous else t), peak, peak_time
         previous = f
 
 
@@ -85,37 +88,64 @@ def test_ball_on_block_reference_case(tmp_path):
     assert t_impact == pytest.approx(math.sqrt(2 * fall / G), rel=1e-9)
     assert v_impact == pytest.approx(math.sqrt(2 * G * fall), rel=1e-9)
 
-    # Contact: steps with a nonzero contact force times dt, against the force pulse of the same Hertz law
-    # with its calibrated damping and gravity (damped_hertz_pulse).  The discrete count errs by <= 2 dt
-    # (0.4 % of 0.054 s) and the block's compliance by ~1e-4 (test below): 2 % holds with margin.  The
-    # undamped Hertz estimate 2.868 (m^2 / (R E*^2 v))^(1/5) is printed for comparison.
+    # Contact: steps with a nonzero contact force times dt, and the peak force, against the force pulse of the
+    # same Hertz law with its calibrated damping and gravity (damped_hertz_pulse).  The undamped Hertz
+    # estimate 2.868 (m^2 / (R E*^2 v))^(1/5) is printed for comparison.
     touching, peak_displacement, peak_force = 1, 0.0, 0.0
+    surface = sim.coupled_surfaces[0]
     while sim.wall_force("block")[2] != 0.0:
-        peak_force = max(peak_force, -sim.wall_force("block")[2])
+        if -sim.wall_force("block")[2] > peak_force:
+            peak_force = -sim.wall_force("block")[2]
+            peak_nodal_forces = surface.node_forces.copy()  # this step's counter-forces, as the block got them
         u = block.displacements[top_nodes] - u_static
         peak_displacement = max(peak_displacement, float(np.max(np.linalg.norm(u, axis=1))))
         sim.step()
         touching += 1
     gamma = normal_damping_coefficient("hertz_mindlin", 0.2)
     length = (m * v_impact**2 / k) ** 0.4
-    expected = damped_hertz_pulse(gamma, G * length / v_impact**2) * length / v_impact
+    pulse, pulse_peak, pulse_peak_time = damped_hertz_pulse(gamma, G * length / v_impact**2)
+    expected, expected_peak = pulse * length / v_impact, pulse_peak * m * v_impact**2 / length
+    t_peak = pulse_peak_time * length / v_impact  # the damped pulse's rise time, 5.3 ms
     duration = touching * dt
+
+    # Quasi-static block deflection under the peak force: the same mesh, the peak step's nodal forces,
+    # a static solve (the contact lasts 0.054 s, ~50 periods of the block's ~1 ms modes).
+    quasi_static = Simulation.from_dict(ball_on_block(dt=dt, cells=(2, 2, 1)), output_dir=str(tmp_path / "static"))
+    static_block = quasi_static.solids["block"]
+    static_block.add_nodal_forces(quasi_static.coupled_surfaces[0].node_indices, peak_nodal_forces)
+    static_block.static_solve()
+    static_deflection = float(np.max(np.linalg.norm(static_block.displacements[top_nodes] - u_static, axis=1)))
     print(f"impact t = {t_impact:.6f} s, v = {v_impact:.6f} m/s; force pulse {duration:.5f} s vs damped Hertz "
           f"{expected:.5f} s ({duration / expected - 1:+.3%}; undamped Hertz 2.868(...)^0.2 = "
-          f"{2.868 * (m * m / (BALL_RADIUS * e_star**2 * v_impact)) ** 0.2:.5f} s); peak force {peak_force:.4g} N, "
-          f"block peak displacement {peak_displacement:.3e} m")
+          f"{2.868 * (m * m / (BALL_RADIUS * e_star**2 * v_impact)) ** 0.2:.5f} s); peak force {peak_force:.6g} N "
+          f"vs damped Hertz {expected_peak:.6g} N ({peak_force / expected_peak - 1:+.3%}); block peak displacement "
+          f"{peak_displacement:.4e} m = {peak_displacement / static_deflection:.4f} x the static deflection under "
+          f"the peak force {static_deflection:.4e} m")
+    # Duration: the discrete count errs by <= 2 dt (0.4 % of 0.054 s), the block's compliance by ~1e-4 (test
+    # below) and the dashpot's first-order step error by ~0.2 dt / t_peak (next comment) over the whole pulse;
+    # measured -1.4 %.
     assert duration == pytest.approx(expected, rel=0.02)
-    # Peak block displacement: a few times F / (E a) with the contact radius a = sqrt(R delta)... a
-    # sanity window only (it is *reported*); it must be nonzero (the block deforms) and far below the overlap.
-    assert 1e-7 < peak_displacement < 1e-3
+    # Peak force: the kernel's dashpot acts on the half-step velocity, an error first order in dt: on a rigid
+    # plane the peak is measured +0.32 %, +0.14 %, +0.06 % above the damped Hertz value at dt = 1e-4, 5e-5,
+    # 2.5e-5, i.e. 0.17 dt / t_peak with the damped pulse's rise time t_peak = 5.3 ms; the block's
+    # vibration adds ~0.1 % (measured +0.42 % in all).  Allowed: 0.5 dt / t_peak = 0.94 %.
+    assert peak_force == pytest.approx(expected_peak, rel=0.5 * dt / t_peak)
+    # Peak block displacement against the quasi-static deflection under the peak nodal forces.  The damping
+    # term makes the force jump in as x^0.25 (nearly a step), which sets the undamped block ringing: for a load
+    # that rises to its peak and then varies slowly, each mode's response stays below twice its static value
+    # (the dynamic load factor of a step).  From below: the force stays within 1 % of its peak for 2.5 ms
+    # (> 2 periods of the ~1 ms modes), so the response passes the static value.  Measured 1.17.
+    assert 0.99 * static_deflection <= peak_displacement <= 2.0 * static_deflection
 
-    # Resting overlap: bounces decay (e = 0.2: 0.012 m, 5e-4 m, ...) and the contact oscillation is damped;
-    # after 0.6 s more the residual oscillation is < 1e-3 of delta (measured).  Hertz static value.
+    # Resting overlap against the Hertz static value.  The ball's contact oscillation (omega ~ 47 rad/s,
+    # damping ratio ~0.4 at e = 0.2) has decayed below 1e-5 of delta after the 0.6 s, but the block is undamped:
+    # the vibration the impacts left (top range ~0.7 um) moves the contact point by +-5e-5 delta (measured
+    # over 0.85-0.9 s), so the value at one instant is within 1e-4.
     sim.step(6000)
     delta = overlap(sim)
     static = (m * G / k) ** (2.0 / 3.0)
     print(f"resting overlap {delta:.6e} m vs Hertz static {static:.6e} m ({delta / static - 1:+.3%})")
-    assert delta == pytest.approx(static, rel=0.01)
+    assert delta == pytest.approx(static, rel=1e-4)
 
 
 def rebound(scene, tmp_path, steps=1500):
@@ -177,12 +207,11 @@ def test_sub_cycling_error_converges_as_fem_every_goes_to_one(tmp_path, element)
     print(f"{element}: rebound {speed:.6g} m/s, peak {f1:.6g} N; fem_every 2: {errors[2][0]:.2e} / {errors[2][1]:.2e}, "
           f"5: {errors[5][0]:.2e} / {errors[5][1]:.2e} (rebound / peak)")
     for which in (0, 1):
-        # Every error is bounded by the surface lag's effect: the block's surface moves w ~ 1e-4 m during the
-        # contact (peak force / block stiffness), so freezing it for (k - 1) dt of a t_c ~ 0.06 s contact
-        # shifts the overlap by ~ w (k - 1) dt / t_c against delta_max ~ 0.05 m: << 1e-2 at k = 5.
+        # Freezing the surface for (k - 1) dt of a t_c ~ 0.055 s contact: an error of the order of that fraction,
+        # (k - 1) dt / t_c = 7.3e-3 at k = 5 (measured up to 5.4e-3, P2; P1 1.0e-3).
         assert errors[5][which] < 1e-2
         if element == "P1":
             # P1: monotone, first order in (k - 1): the k = 5 error is 4x the k = 2 one within a factor 2.
             assert 2 * errors[2][which] < errors[5][which] < 8 * errors[2][which]
-        # P2 (measured): errors ~2-6e-4 at both k, not monotone: the P2 face's midside nodes add surface
-        # modes whose phase the sub-cycling shifts; only the bound is asserted.
+        # P2: the face's midside nodes add surface modes whose phase the sub-cycling shifts, so the errors need
+        # not be monotone in k (measured 6-8e-4 at k = 2, 4.7-5.4e-3 at k = 5); only the bound is asserted.

@@ -3,10 +3,12 @@
 Tolerance from round-off: the ranks sum forces (FE assembly, MatMult, contact spreading via ADD_VALUES,
 the reductions) in another order, which perturbs the state by a few ulp per step; the collisions then
 amplify that.  The serial run with particle 0 shifted by one ulp measures that amplification; the
-parallel difference must stay within 100x of it, above a floor: 1e4 eps of the scale for the particle
-state, and for FE-derived quantities (surface force, support reaction, surface displacements) 10x the
-static solve's relative tolerance (KSP rtol 1e-10: GAMG on another partition converges to another
-point within it, and that initial state is carried through the run).
+parallel difference must stay within 100x of it, above a floor of 1e4 eps of the scale: a few eps per step
+over the 400 / 1500 steps.  The case script converges the solids' static start to rtol 1e-13, so that it
+does not differ between partitions by the default 1e-10's slack (at 1e-10 the block's surface displacements
+differed by 6.7e-11 of their scale).  Measured (3 ranks vs 1, relative to the scale, over several runs):
+positions <= 2.7e-16, velocities <= 3.6e-15, surface force history <= 1.4e-13, support reaction <= 1.6e-14,
+surface displacements <= 1.3e-14: all below the floor (2.2e-12).
 """
 import numpy as np
 import pytest
@@ -22,6 +24,7 @@ def run(tmp_path, ranks, case, steps, *extra):
     return dict(np.load(out))
 
 
+@pytest.mark.mpi
 @pytest.mark.parametrize("case, steps", [("ball", 400), ("pile", 1500)])
 def test_one_and_three_ranks_agree(tmp_path, case, steps):
     serial = run(tmp_path, 1, case, steps)
@@ -33,7 +36,7 @@ def test_one_and_three_ranks_agree(tmp_path, case, steps):
         scale = np.max(np.abs(serial[key]))
         growth = np.max(np.abs(nudged[key] - serial[key]))
         difference = np.max(np.abs(parallel[key] - serial[key]))
-        floor = 1e4 * EPS * scale if key in ("positions", "velocities") else 1e-9 * scale
+        floor = 1e4 * EPS * scale
         tolerance = max(100 * growth, floor)
         print(f"{case} {key}: 3 ranks vs 1 {difference:.3g}, one-ulp growth {growth:.3g}, tolerance {tolerance:.3g} "
               f"(scale {scale:.3g})")

@@ -226,9 +226,10 @@ def test_restitution(model, kind, speed, restitution):
         separation = sim.particles.velocities[0, 2]
     assert sim.contact_count() == 0, "the contact must have ended"
     measured = separation / approach
-    # 1 %: the issue's requirement; the discretisation error is <= 0.5 % by the
-    # choice of steps (see _rebound_steps), the calibration itself is exact (1e-12).
-    assert abs(measured / restitution - 1.0) < 0.01, (measured, restitution, steps)
+    # The issue asks for 1 %; asserted is the 0.5 % the step count was chosen for (the first-order
+    # discretisation error, see _rebound_steps), the calibration itself being exact (1e-12).
+    # Measured over the 36 cases: at most 1.1e-3 (Hertz, e = 0.2), independent of the speed.
+    assert abs(measured / restitution - 1.0) < 5e-3, (measured, restitution, steps)
 
 
 # ----------------------------------------------------------------------------- 4. oblique impact
@@ -260,8 +261,8 @@ def test_oblique_impact_sliding():
     assert sim.contact_count() == 0
     rebound = p.velocities[0, 2] / normal_speed
     spin = p.angular_velocities[0, 1]
-    # Normal rebound: within 1 % of e (as test_restitution).
-    assert abs(rebound / e - 1.0) < 0.01
+    # Normal rebound: within the 0.5 % discretisation bound of e (as test_restitution).
+    assert abs(rebound / e - 1.0) < 5e-3
     # Impulse solution with the measured normal impulse m (v_n + v_n'): isolates the
     # friction law from the restitution error.  The tangential velocity is then exact
     # up to the first step of the contact, where the spring starts from zero below
@@ -273,10 +274,10 @@ def test_oblique_impact_sliding():
     onset = 1.0 / steps
     assert abs(p.velocities[0, 0] - (tangential_speed - impulse)) < onset * impulse
     assert abs(spin / (2.5 * impulse / radius) - 1.0) < onset + lever_error, (spin, 2.5 * impulse / radius)
-    # Against the nominal e as well: the issue's impulse solution, plus the 1 % restitution error
+    # Against the nominal e as well: the issue's impulse solution, plus the 0.5 % restitution error
     # scaled by e / (1 + e).
     nominal = mu * (1.0 + e) * normal_speed
-    allowed = onset + 0.01 * e / (1.0 + e)
+    allowed = onset + 5e-3 * e / (1.0 + e)
     assert abs((tangential_speed - p.velocities[0, 0]) / nominal - 1.0) < allowed
     assert abs(spin / (2.5 * nominal / radius) - 1.0) < allowed + lever_error
 

@@ -94,13 +94,18 @@ def test_history_survives_rebuild(tangential_speed):
     rebuilt.particle_system._rebuild()
     forgotten.particle_system.neighbors.history[:] = 0.0
     force_scale = np.abs(_by_id(reference, "forces")[:2]).max()
+    velocity_scale = np.abs(_by_id(reference, "velocities")[:2]).max()
+    round_off = 4 * np.finfo(float).eps
     for _ in range(20):
         for sim in (reference, rebuilt, forgotten):
             sim.step(1)
-        # Same tangential (and normal) force after the rebuild: only the summation order
-        # may change, so agreement to round-off (1e-12 of the force).
-        assert np.allclose(_by_id(rebuilt, "forces"), _by_id(reference, "forces"), rtol=0, atol=1e-12 * force_scale)
-        assert np.allclose(_by_id(rebuilt, "velocities"), _by_id(reference, "velocities"), rtol=1e-12, atol=1e-15)
+        # Same tangential (and normal) force after the rebuild.  Each sphere has this one contact, so there
+        # is no sum to reorder; the re-sort may swap the pair's roles (i, j), which negates every difference
+        # exactly.  Allowed: a few eps (measured identical).
+        assert np.allclose(_by_id(rebuilt, "forces"), _by_id(reference, "forces"), rtol=0,
+                           atol=round_off * force_scale)
+        assert np.allclose(_by_id(rebuilt, "velocities"), _by_id(reference, "velocities"), rtol=0,
+                           atol=round_off * velocity_scale)
     # Control: while sticking, dropping the history changes the force by far more (so the
     # comparison above can fail).  While sliding the force is mu F_n whatever the spring
     # held, so there the history shows only once the contact sticks again.

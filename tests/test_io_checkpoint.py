@@ -37,12 +37,14 @@ def written(tmp_path_factory):
     return root
 
 
+@pytest.mark.mpi
 @pytest.mark.parametrize("write_ranks,read_ranks", [(3, 1), (3, 2), (3, 3), (1, 3), (2, 2)])
 def test_round_trip_on_any_rank_count(written, write_ranks, read_ranks):
     completed = run_under_mpi(read_ranks, "io_checkpoint.py", "read", written / f"w{write_ranks}" / LATEST, N, 15)
     assert f"OK {read_ranks}" in completed.stdout
 
 
+@pytest.mark.mpi
 def test_particle_tables_identical_for_any_writer_rank_count(written):
     tables = []
     for ranks in (1, 2, 3):
@@ -56,6 +58,7 @@ def test_particle_tables_identical_for_any_writer_rank_count(written):
     assert np.array_equal(tables[0]["particles/ids"], np.arange(N))
 
 
+@pytest.mark.mpi
 def test_keep_and_latest(written):
     directory = written / "w2"
     names = sorted(p.name for p in directory.iterdir())
@@ -225,11 +228,13 @@ def run_stop_case(tmp_path, ranks: int, deliver):
     return stopped
 
 
+@pytest.mark.mpi
 def test_sigterm_to_one_rank_stops_all_ranks_together(tmp_path):
     stopped = run_stop_case(tmp_path, 3, lambda process, pids: os.kill(pids[1], signal.SIGTERM))
     assert [s[1] for s in stopped] == ["-", "SIGTERM", "-"]
 
 
+@pytest.mark.mpi
 def test_sigusr1_to_mpiexec_is_forwarded(tmp_path):
     if shutil.which("mpiexec") is None:
         pytest.skip("no mpiexec")

@@ -34,6 +34,7 @@ def written(request, tmp_path_factory):
     return request.param, out
 
 
+@pytest.mark.mpi
 def test_particle_values_read_back(written):
     ranks, out = written
     with h5py.File(out / "particles.h5", "r") as handle:
@@ -53,6 +54,7 @@ def test_particle_values_read_back(written):
                 assert np.array_equal(g[name][()], values), name
 
 
+@pytest.mark.mpi
 def test_particle_xdmf_index(written):
     _, out = written
     root = ET.parse(out / "particles.xdmf").getroot()
@@ -66,6 +68,7 @@ def test_particle_xdmf_index(written):
     assert not list(out.glob("*.tmp-*")), "temporary XDMF left behind"
 
 
+@pytest.mark.mpi
 def test_solid_values_read_back_with_meshio(written):
     _, out = written
     points, cells = io_data.box_tet_mesh()
@@ -86,6 +89,7 @@ def test_solid_values_read_back_with_meshio(written):
             assert np.array_equal(cell_data["von_mises"][0], expected)
 
 
+@pytest.mark.mpi
 def test_resume_truncates_later_steps(tmp_path):
     run_under_mpi(2, "io_output.py", tmp_path, "--resume-check")
     with h5py.File(tmp_path / "particles.h5", "r") as handle:
@@ -99,6 +103,7 @@ def test_resume_truncates_later_steps(tmp_path):
     assert times == [0.0, 1.0e-3, 3.0e-3]
 
 
+@pytest.mark.mpi
 def test_paraview_opens_both_series(written):
     pvpython = shutil.which("pvpython")
     if pvpython is None:

@@ -67,6 +67,7 @@ def test_output_serial_p1(tmp_path):
     assert (tmp_path / "history.csv").read_text().count("\n") == 4
 
 
+@pytest.mark.mpi
 def test_output_two_ranks_p2(tmp_path):
     run_under_mpi(2, "restart_output.py", tmp_path, STEPS, "P2", tmp_path / "state.npz")
     check_files(tmp_path, np.load(tmp_path / "state.npz"))

@@ -165,24 +165,31 @@ def test_pile_in_a_corner_is_rebalanced(results):
 # ----------------------------------------------------------------------------- 4. lost particles
 @pytest.mark.mpi
 def test_lost_particles_are_removed_and_counted(results):
-    """12 spheres fly out through the bounded domain's x = 20 mm face, and one goes NaN: all 13 are
-    removed and counted (history.csv lost_particles), no id is duplicated, nothing stays NaN."""
+    """12 spheres fly out through the bounded domain's x = 20 mm face: all 12 are removed and counted
+    (history.csv lost_particles), no id is duplicated, nothing stays NaN.  A particle that goes NaN
+    (as after a blow-up) stops the run at once with exit 3 (the run monitor); stepping on, the
+    rebuild removes and counts it."""
     for ranks in (1,) + RANKS:
         result = results("lost", ranks)
         total, escaping = int(result["total"]), int(result["escaping"])
-        assert int(result["lost"]) == escaping + 1, (ranks, int(result["lost"]))
-        assert int(result["count"]) == total - escaping - 1
+        assert int(result["lost"]) == escaping, (ranks, int(result["lost"]))
+        assert int(result["count"]) == total - escaping
         ids = result["ids"]
         assert len(np.unique(ids)) == len(ids)
-        assert 0 not in ids, "the NaN particle (id 0) is removed"
         assert np.all(ids < total - escaping), "the escaping particles are removed"
         assert bool(result["finite"])
         with open(str(result["history"])) as handle:
             rows = list(csv.DictReader(handle))
         lost = [int(float(row["lost_particles"])) for row in rows]
         particles = [int(float(row["particles"])) for row in rows]
-        assert lost[-1] == escaping + 1 and lost == sorted(lost)
+        assert lost[-1] == escaping and lost == sorted(lost)
         assert all(p + n == total for p, n in zip(particles, lost))
-        # Row 0 shows the injected NaN (written before the first step); every later row is finite.
-        for row in rows[1:]:
+        for row in rows:
             assert all(np.isfinite(float(value)) for value in row.values()), row
+        # The NaN particle: the run stopped before its first step, on every rank.
+        stopped = str(result["stopped"])
+        assert stopped.startswith("run stopped at step 0") and "non-finite energies" in stopped, stopped
+        blown_ids = result["blown_ids"]
+        assert 0 not in blown_ids and len(blown_ids) == total - 1, "the NaN particle (id 0) is removed"
+        assert int(result["blown_lost"]) == 1 and int(result["blown_nonfinite"]) == 1
+        assert bool(result["blown_finite"])

@@ -259,7 +259,12 @@ def test_rayleigh_time_and_time_step():
     expected = math.pi * 1e-3 * math.sqrt(2500 / shear) / 0.92553
     assert derived.rayleigh_time(scene) == pytest.approx(expected, rel=1e-12)
     assert expected == pytest.approx(1.2239e-4, rel=1e-4)
-    assert derived.time_step(scene) == pytest.approx(0.2 * expected, rel=1e-12)
+    # dt auto: dt_factor (0.2) x T_R, or less where a contact at the impact speed needs it.
+    limits = [limit for limit, _ in derived.contact_step_limits(scene, derived.expected_impact_speed(scene))]
+    assert limits and min(limits) < 0.2 * expected  # this scene's falling grains need the contact limit
+    assert derived.time_step(scene) == pytest.approx(min(limits), rel=1e-12)
+    at_rest, _ = load_scene(modified(lambda s: s.update(gravity=[0, 0, 0])))
+    assert derived.time_step(at_rest) == pytest.approx(0.2 * expected, rel=1e-12)  # no impacts: T_R alone
     # A spread uses the smallest radius; an explicit dt is taken as given.
     spread, _ = load_scene(modified(lambda s: s["particles"][0].update(radius={"min": 5e-4, "max": 1e-3})))
     assert derived.rayleigh_time(spread) == pytest.approx(0.5 * expected, rel=1e-12)
@@ -359,11 +364,11 @@ def test_counts_and_memory_estimate():
 
 
 def test_warnings_flag_a_coarse_step():
-    scene, _ = load_scene(base_scene())
-    # dt = 0.2 T_R = 2.4e-5 s against a ~2e-4 s contact at ~1.4 m/s: fewer than 30 steps per contact.
-    assert any("steps (want >= 30)" in warning for warning in derived.warnings(scene))
-    fine, _ = load_scene(modified(lambda s: s["time"].update(dt_factor=0.05)))
-    assert not any("steps (want >= 30)" in warning for warning in derived.warnings(fine))
+    # dt = 2.4e-5 s (0.2 T_R) against a ~2e-4 s contact at ~1.4 m/s: fewer than 30 steps per contact.
+    scene, _ = load_scene(modified(lambda s: s["time"].update(dt=2.4e-5)))
+    assert any("steps per particle-particle contact" in warning for warning in derived.warnings(scene))
+    fine, _ = load_scene(base_scene())  # dt: auto resolves the contact
+    assert not any("steps per" in warning for warning in derived.warnings(fine))
     unstable, _ = load_scene(modified(lambda s: s["time"].update(dt=1e-4)))
     assert any("may be unstable" in warning for warning in derived.warnings(unstable))
     behind, _ = load_scene(modified(lambda s: s["walls"][0].update(point=[0, 0, 0.05])))

@@ -65,7 +65,11 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
                      history, row, dt, rolling_enabled):
     """Force and rolling torque on i for one contact; updates history[row].
 
-    Returns (fx, fy, fz, rolling torque x, y, z, elastic energy, dissipated energy this step).
+    Returns (fx, fy, fz, rolling torque x, y, z, elastic energy, dissipated energy this step,
+    normal and tangential dashpot coefficients in effect).  The dashpots' force on i is
+    -(c_n n n^T + c_t (I - n n^T)) v; c_n is 0 when the normal force was clamped at zero and c_t is 0
+    when the contact slides (the force is then not linear in v).  A deformable surface applies the
+    dashpot to its own nodes at its own rate (pdemfem.coupling.dampers).
     """
     elastic_force, normal_stiffness, tangential_stiffness, normal_energy = normal_stiffnesses(
         model, overlap, effective_mass, effective_radius, effective_modulus, effective_shear_modulus,
@@ -74,9 +78,11 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
     # Normal: spring + dashpot, never attractive.
     normal_speed = vx * nx + vy * ny + vz * nz
     approach_rate = -normal_speed
-    normal_force = elastic_force + damping * math.sqrt(effective_mass * normal_stiffness) * approach_rate
+    normal_damping = damping * math.sqrt(effective_mass * normal_stiffness)
+    normal_force = elastic_force + normal_damping * approach_rate
     if normal_force < 0.0:
         normal_force = 0.0
+        normal_damping = 0.0
     dissipated = (normal_force - elastic_force) * approach_rate * dt
 
     # Tangential: incremental spring xi, rotated into the current tangent plane.
@@ -122,6 +128,7 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
         # dashpot into xi as well, xi = -(F_t + c v_t) / S_t, points xi against the force whenever
         # c |v_t| > mu F_n; with S_t growing (Hertz) the next step's force then pushes along the slip.
         scale = friction_limit / tangential_force
+        tangential_damping = 0.0
         fx *= scale
         fy *= scale
         fz *= scale
@@ -160,7 +167,7 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
             my = -torque * ry / rolling_speed
             mz = -torque * rz / rolling_speed
             dissipated += torque * rolling_speed * dt
-    return fx, fy, fz, mx, my, mz, normal_energy + spring_energy, dissipated
+    return fx, fy, fz, mx, my, mz, normal_energy + spring_energy, dissipated, normal_damping, tangential_damping
 
 
 @njit(inline="always", cache=True)
@@ -172,8 +179,8 @@ def rigid_wall_contact(i, nx, ny, nz, distance, surface_vx, surface_vy, surface_
 
     n is the wall's normal at the contact point, which lies `distance` below the centre
     along -n and moves with the surface velocity.  Adds the force and torque to particle i
-    and returns (fx, fy, fz, mx, my, mz, elastic, dissipated): the force and rolling couple
-    on the particle (the wall gets the opposite) and the contact's energies.
+    and returns (fx, fy, fz, mx, my, mz, elastic, dissipated, c_n, c_t): the force and rolling couple
+    on the particle (the wall gets the opposite), the contact's energies and its dashpot coefficients.
     """
     lever = distance
     wx = angular_velocities[i, 0]
@@ -183,7 +190,7 @@ def rigid_wall_contact(i, nx, ny, nz, distance, surface_vx, surface_vy, surface_
     vy = velocities[i, 1] - surface_vy - lever * (wz * nx - wx * nz)
     vz = velocities[i, 2] - surface_vz - lever * (wx * ny - wy * nx)
     material_i = material_index[i]
-    fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
+    fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = contact_response(
         nx, ny, nz, radii[i] - distance, vx, vy, vz, wx, wy, wz, mass[i], radii[i],
         effective_modulus[material_i, wall_material], effective_shear_modulus[material_i, wall_material],
         damping[material_i, wall_material], friction[material_i, wall_material],
@@ -196,7 +203,7 @@ def rigid_wall_contact(i, nx, ny, nz, distance, surface_vx, surface_vy, surface_
     torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
     torques[i, 1] += -lever * (nz * fx - nx * fz) + my
     torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
-    return fx, fy, fz, mx, my, mz, elastic, dissipated
+    return fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping
 
 
 @njit(cache=True)
@@ -278,7 +285,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             effective_mass = mass[i] * mass[j] / (mass[i] + mass[j])
             effective_radius = radius_i * radii[j] / radius_sum
             effective_inertia = 1.0 / (inverse_inertia[i] + inverse_inertia[j])
-            fx, fy, fz, mx, my, mz, elastic, dissipated = contact_response(
+            fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = contact_response(
                 nx, ny, nz, overlap, vx, vy, vz, wxi - wxj, wyi - wyj, wzi - wzj,
                 effective_mass, effective_radius,
                 effective_modulus[material_i, material_j], effective_shear_modulus[material_i, material_j],
@@ -355,7 +362,7 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
             wall_history[i, w, 2] = 0.0
             continue
         # Contact point on the plane, `distance` below the centre.
-        fx, fy, fz, _, _, _, elastic, dissipated = rigid_wall_contact(
+        fx, fy, fz, _, _, _, elastic, dissipated, _, _ = rigid_wall_contact(
             i, nx, ny, nz, distance, wall_velocities[w, 0], wall_velocities[w, 1], wall_velocities[w, 2],
             wall_material[w], wall_history[i], w, velocities, angular_velocities, radii, mass, inverse_inertia,
             material_index, effective_modulus, effective_shear_modulus, damping, friction, rolling_friction,

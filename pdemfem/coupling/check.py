@@ -1,11 +1,22 @@
-"""`pdemfem check` lines for coupled scenes: the DEM step, each solid's FE critical step, the sub-cycling."""
+"""`pdemfem check` lines for coupled scenes: the DEM step, each solid's FE critical step, the sub-cycling,
+and the coupled scheme's stability figures (docs/stability.md, docs/coupling.md)."""
 from __future__ import annotations
 
 import math
 
+import numpy as np
 
-def coupling_report(scene, base_dir, dt: float, comm=None) -> list:
-    """Lines naming, per solid, the FE critical step and how the coupling covers a DEM step.
+# Above this, the contact's held elastic force could overshoot an unsupported surface node within one
+# interval (central difference of the contact spring on the node's mass: S_n h^2 / m <= 4).
+HELD_FORCE_LIMIT = 1.0
+# Above this, one contact displaces the surface as much as the solid resists it (S_n vs E l): the surface
+# then follows the contact force within the interval and the held force lags it.
+SURFACE_COMPLIANCE_LIMIT = 0.1
+
+
+def coupling_report(scene, base_dir, dt: float, comm=None, warnings=None) -> list:
+    """Lines naming, per solid, the FE critical step, how the coupling covers a DEM step and the contact's
+    stiffness and damping against the surface nodes; appends stability warnings to `warnings`.
 
     Builds each solid (mesh, operators; no static solve): collective on `comm` (default COMM_SELF)."""
     if not scene.solids:
@@ -26,4 +37,64 @@ def coupling_report(scene, base_dir, dt: float, comm=None) -> list:
         lines.append(f"solid {config.name}: {3 * solid.n_global_nodes} DOF ({config.element}, {config.mass} mass), "
                      f"FE critical step {critical:.3g} s = {critical / dt:.3g} x DEM dt -> {substeps} FE sub-step(s) "
                      f"of {interval / substeps:.3g} s per advance; contact groups {list(config.contact)}")
+        if config.contact and scene.particles:
+            lines.extend(_contact_figures(scene, config, solid, interval, warnings))
     return lines
+
+
+def _contact_figures(scene, config, solid, interval: float, warnings) -> list:
+    """The heaviest particle at the expected impact speed against this solid's lightest surface node."""
+    from pdemfem.contact.restitution import normal_damping_coefficient
+    from pdemfem.scene import derived
+
+    from mpi4py import MPI
+
+    surface = solid.contact_surface()
+    indices, positions, _ = solid.surface_state()  # collective: every rank gets all surface nodes
+    start, end = solid.global_node_range
+    owned = (indices >= start) & (indices < end)
+    masses = solid.lumped_mass.getArray(readonly=True).reshape(-1, 3)[np.asarray(indices[owned]) - start, 0]
+    node_mass = solid.comm.allreduce(float(masses.min()) if len(masses) else math.inf, op=MPI.MIN)
+    triangles = np.asarray(surface.triangles)
+    edges = np.linalg.norm(positions[triangles] - positions[np.roll(triangles, 1, axis=1)], axis=2)
+    element_size = float(np.median(edges))
+    speed = max(derived.expected_impact_speed(scene), 1e-3)
+    solid_material = scene.materials[config.material]
+    worst = None
+    for group in scene.particles:
+        material = scene.materials[group.material]
+        _, radius = derived.group_radius_range(group)
+        mass = 4.0 / 3.0 * math.pi * radius**3 * material.density
+        modulus = 1.0 / ((1 - material.poisson_ratio**2) / material.youngs_modulus
+                         + (1 - solid_material.poisson_ratio**2) / solid_material.youngs_modulus)
+        overlap = (15.0 * mass * speed**2 / (16.0 * modulus * math.sqrt(radius))) ** 0.4
+        stiffness = 2.0 * modulus * math.sqrt(radius * overlap)
+        interaction = scene.interaction(group.material, config.material)
+        dashpot = normal_damping_coefficient(interaction.model, interaction.restitution) * math.sqrt(mass * stiffness)
+        held = stiffness * interval**2 / (4.0 * node_mass)
+        if worst is None or held > worst[0]:
+            worst = (held, dashpot * interval / node_mass, stiffness / (solid_material.youngs_modulus * element_size),
+                     group.name, stiffness)
+    held, damping_ratio, compliance, name, stiffness = worst
+    lines = [f"solid {config.name}: contact vs surface nodes (group {name} at {speed:.3g} m/s, lightest node "
+             f"{node_mass:.3g} kg, element {element_size:.3g} m): held force S_n h^2/(4 m) = {held:.3g} "
+             f"(limit {HELD_FORCE_LIMIT:g}), dashpot c h / m = {damping_ratio:.3g} (implicit on the nodes: any value), "
+             f"surface compliance S_n/(E l) = {compliance:.3g}"]
+    if warnings is not None and held > HELD_FORCE_LIMIT and compliance > SURFACE_COMPLIANCE_LIMIT:
+        limit = 2.0 * math.sqrt(HELD_FORCE_LIMIT * node_mass / stiffness)
+        warnings.append(
+            f"solid {config.name}: the contact force held over an interval of {interval:.3g} s can overshoot its "
+            f"lightest surface node (S_n h^2/(4 m) = {held:.3g} > {HELD_FORCE_LIMIT:g}) on a surface that yields "
+            f"to the contact (S_n/(E l) = {compliance:.3g} > {SURFACE_COMPLIANCE_LIMIT:g}); make the interval "
+            f"fem_every x dt <= {limit:.3g} s (lower fem_every, then dt) or coarsen the contact surface's mesh")
+    return lines
+
+
+def coupling_warnings(scene, solids: dict, dt: float) -> list:
+    """Collective: the coupled-stability warnings of `pdemfem check` for already built solids (run)."""
+    found = []
+    interval = scene.coupling.fem_every * dt
+    for config in scene.solids:
+        if config.contact and scene.particles:
+            _contact_figures(scene, config, solids[config.name], interval, found)
+    return found

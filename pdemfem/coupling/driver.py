@@ -29,6 +29,12 @@ measured at the half level, m v^{n+1} + dt/2 F^{n+1} (the velocity after the nex
 first half kick), particles + solid conserve linear momentum to round-off; the
 barycentric / quadratic-face spreading conserves force and moment exactly.
 
+Contact dashpots.  The damping part of each contact force is not held over the interval:
+the solid applies it to the surface nodes implicitly at every FE sub-step and the particles
+receive the balancing impulse after the advance (coupling/dampers.py: a dashpot held
+constant over the sub-steps, with the surface velocity of the previous interval, pumps
+energy into the solid's high modes; this keeps momentum exact and the exchange dissipative).
+
 Sub-cycling knobs:
 - fem_every = k: the solid advances every k DEM steps over k dt with the mean
   (impulse-preserving) load of those steps.  The prime then covers (k+1)/2 dt,
@@ -62,8 +68,8 @@ class CouplingDriver:
 
         The load is scaled so that the solid receives F^0 dt, the impulse the particles get from F^0."""
         for surface in self.surfaces:
-            surface.collect_contact_forces()
-            surface.send_forces_to_solid(self.dt / self.lead)
+            surface.collect_contact_forces(keep_dampers=False)
+            surface.send_forces_to_solid(self.dt / self.lead, dampers=False)
         self._advance_solids(self.lead)
 
     def _advance_solids(self, interval: float) -> None:
@@ -73,6 +79,8 @@ class CouplingDriver:
             self.fem_substeps[name] = solid.advance(interval)
         for surface in self.surfaces:
             surface.refresh_vertices(interval)
+            # The records move between ranks only when particles can have moved since they were taken.
+            surface.balance_dampers(self.dt, exchange=self.fem_every > 1)
         self.advances += 1
 
     def after_particle_step(self) -> None:

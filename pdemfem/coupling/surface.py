@@ -6,11 +6,18 @@ displacement and velocity after every FE step.  Contact counter-forces go back
 to the owning FE nodes through Solid.add_nodal_forces (PETSc ADD_VALUES), so
 every rank adds only the contacts of the particles it owns and each contact is
 summed exactly once.
+
+The contacts' dashpots are not part of that held load: the solid applies them to its
+surface nodes at every FE sub-step and the particles get the balancing impulse after the
+advance (pdemfem.coupling.dampers explains why and how momentum stays exact).
 """
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 
+from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_ID, RECORD_INDEX, balance_particles, make_records,
+                                      node_dampers)
 from pdemfem.coupling.transfer import (SUB_TRIANGLE_AREA_COORDINATES, parent_faces_from_split, spread_linear,
                                        spread_quadratic)
 from pdemfem.walls.mesh import TriangleSurface
@@ -31,10 +38,23 @@ class CoupledSurface:
         self.node_forces = np.zeros((len(self.node_indices), 3))
         # Forces summed over the DEM steps since the last FE advance (sub-cycling).
         self.accumulated_forces = np.zeros_like(self.node_forces)
+        # This rank's contact dashpots of the DEM steps since the last advance (dampers.RECORD_COLUMNS rows),
+        # and those of the advance in progress (balanced on the particles after it).
+        self.damper_records = []
+        self._advanced_records = np.zeros((0, RECORD_COLUMNS))
+        self.particle_system = None  # set by the simulation: the dashpot balance acts on its particles
+        self.dissipation_correction_local = 0.0  # [J], this rank's contacts (dampers.balance_particles)
+        self.unbalanced_records = 0  # records whose particle no rank owned any more (lost particles)
 
-    def collect_contact_forces(self) -> None:
-        """Add this step's contact counter-forces (this rank's contacts) to the accumulator."""
+    def collect_contact_forces(self, keep_dampers: bool = True) -> None:
+        """Add this step's contact counter-forces (this rank's contacts) to the accumulator and keep the
+        contacts' dashpots for the next advance."""
         contacts = self.triangle_surface.contacts
+        if keep_dampers and self.particle_system is not None and len(contacts.triangle):
+            records = make_records(contacts.particle, self.particle_system.state.ids[contacts.particle],
+                                   contacts.triangle, contacts.weights, contacts.damping)
+            if len(records):
+                self.damper_records.append(records)
         self.node_forces[:] = 0.0
         if len(contacts.triangle):
             if self.quadratic:
@@ -44,11 +64,89 @@ class CoupledSurface:
                 spread_linear(self.triangles, contacts.triangle, contacts.weights, contacts.force, self.node_forces)
         self.accumulated_forces += self.node_forces
 
-    def send_forces_to_solid(self, scale: float) -> None:
-        """Add scale x the accumulated forces to the solid's nodal loads (ADD_VALUES to the owners)."""
-        loaded = np.flatnonzero(np.any(self.accumulated_forces != 0.0, axis=1))
-        self.solid.add_nodal_forces(self.node_indices[loaded], scale * self.accumulated_forces[loaded])
+    def send_forces_to_solid(self, scale: float, dampers: bool = True) -> None:
+        """Add scale x the accumulated forces to the solid's nodal loads (ADD_VALUES to the owners).
+
+        dampers: the kept contacts' dashpots go to the solid as nodal dashpots (scaled alike) and leave
+        the held load; without, the held load keeps them (the prime, whose impulse is F^0 dt exactly)."""
+        forces = scale * self.accumulated_forces
+        records = np.concatenate(self.damper_records) if self.damper_records else np.zeros((0, RECORD_COLUMNS))
+        self.damper_records = []
+        self._advanced_records = records if dampers else records[:0]
+        if dampers and len(records):
+            tensors = np.zeros((len(self.node_indices), 6))
+            targets = np.zeros((len(self.node_indices), 3))
+            previous_forces = np.zeros((len(self.node_indices), 3))
+            node_dampers(records, self.triangles, scale, tensors, targets, previous_forces)
+            forces -= previous_forces
+            damped = np.flatnonzero(np.any(tensors != 0.0, axis=1))
+            self.solid.add_contact_dampers(self.node_indices[damped], tensors[damped], targets[damped])
+        loaded = np.flatnonzero(np.any(forces != 0.0, axis=1))
+        self.solid.add_nodal_forces(self.node_indices[loaded], forces[loaded])
         self.accumulated_forces[:] = 0.0
+
+    def balance_dampers(self, dt: float, exchange: bool) -> None:
+        """After an advance and refresh_vertices: give the particles the dashpot impulse the solid took
+        beyond what their step gave them (dampers.py).  exchange (collective): records whose particle
+        this rank no longer owns (moved within a sub-cycling window, or restored on rank 0 from a
+        checkpoint) are shared with all ranks and balanced where the particle lives."""
+        records = self._advanced_records
+        self._advanced_records = records[:0]
+        system = self.particle_system
+        if system is None:
+            return
+        state = system.state
+        local_index = self._local_index(records, state)
+        if exchange:
+            unmatched = records[local_index < 0]
+            shared = _allgather_rows(system.comm, unmatched)
+            if len(shared):
+                shared_index = self._local_index(shared, state, by_id_only=True)
+                found = np.array([np.sum(shared_index >= 0)], dtype=np.int64)
+                system.comm.Allreduce(MPI.IN_PLACE, found, op=MPI.SUM)
+                self.unbalanced_records += len(shared) - int(found[0])
+                records = np.concatenate([records[local_index >= 0], shared])
+                local_index = np.concatenate([local_index[local_index >= 0], shared_index])
+        if len(records):
+            self.dissipation_correction_local += balance_particles(
+                records, local_index, self.triangles, self.triangle_surface.vertex_velocities, dt,
+                state.velocities, state.angular_velocities, state.mass, state.inverse_inertia)
+
+    @staticmethod
+    def _local_index(records, state, by_id_only: bool = False) -> np.ndarray:
+        """Row of each record's particle among this rank's owned particles, -1 where not owned here."""
+        owned = state.owned_count
+        ids = records[:, RECORD_ID].astype(np.int64)
+        index = np.full(len(records), -1, dtype=np.int64)
+        if not len(records):
+            return index
+        if not by_id_only:
+            guess = records[:, RECORD_INDEX].astype(np.int64)
+            inside = guess < owned
+            valid = np.zeros(len(records), dtype=np.bool_)
+            valid[inside] = state.ids[guess[inside]] == ids[inside]
+            index[valid] = guess[valid]
+            if valid.all():
+                return index
+        missing = index < 0
+        order = np.argsort(state.ids[:owned], kind="stable")
+        sorted_ids = state.ids[:owned][order]
+        position = np.searchsorted(sorted_ids, ids[missing])
+        position = np.minimum(position, max(owned - 1, 0))
+        found = (owned > 0) & (sorted_ids[position] == ids[missing]) if owned else np.zeros(int(missing.sum()), bool)
+        rows = np.flatnonzero(missing)
+        index[rows[found]] = order[position[found]]
+        return index
+
+    def checkpoint_records(self, comm) -> np.ndarray:
+        """Collective: the dashpot records kept since the last advance, all ranks' rows (on every rank)."""
+        local = np.concatenate(self.damper_records) if self.damper_records else np.zeros((0, RECORD_COLUMNS))
+        return _allgather_rows(comm, local)
+
+    def restore_records(self, rows, comm) -> None:
+        """Records from a checkpoint: rank 0 keeps them all, the next advance shares them (exchange)."""
+        rows = np.asarray(rows, dtype=float).reshape(-1, RECORD_COLUMNS)
+        self.damper_records = [rows.copy()] if len(rows) and comm.rank == 0 else []
 
     def remember_positions(self) -> None:
         """Keep the mirrored positions before an advance (for the mean surface velocity over it)."""
@@ -62,3 +160,16 @@ class CoupledSurface:
         if interval is not None and getattr(self, "_positions_before", None) is not None:
             velocities = (positions - self._positions_before) / interval
         self.triangle_surface.set_vertices(positions, velocities)
+
+
+def _allgather_rows(comm, rows: np.ndarray) -> np.ndarray:
+    """Every rank's float rows (n_r, RECORD_COLUMNS), concatenated in rank order, on every rank."""
+    rows = np.ascontiguousarray(rows, dtype=np.float64).reshape(-1, RECORD_COLUMNS)
+    if comm.size == 1:
+        return rows.copy()
+    counts = np.zeros(comm.size, dtype=np.int64)
+    comm.Allgather(np.array([rows.size], dtype=np.int64), counts)
+    gathered = np.empty(int(counts.sum()), dtype=np.float64)
+    displacements = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    comm.Allgatherv(rows.ravel(), [gathered, counts, displacements, MPI.DOUBLE])
+    return gathered.reshape(-1, RECORD_COLUMNS)

@@ -272,3 +272,70 @@ def central_difference_update(u, v, acceleration, internal, base_load, nodal_loa
         v[i] = v_new
         u[i] += dt * v_new
     return work
+
+
+@njit(cache=True)
+def apply_contact_dampers(u, v, acceleration, lumped_mass, constrained, damped_nodes, dampers, dt, decay, gain):
+    """Implicit nodal dashpots of particle contacts, after a central-difference step (flat dof arrays).
+
+    dampers[k] = (D_xx, D_yy, D_zz, D_yz, D_xz, D_xy, g_x, g_y, g_z) for owned node damped_nodes[k]: the
+    dashpot force on the node is g - D v.  The step's undamped velocity v* is replaced by the solution of
+    (m I + dt D) v = m v* + dt g (backward Euler in the dashpot: dissipative for any dt, unlike the
+    dashpot held constant over the interval), and u moves by dt (v - v*) more.  Constrained dofs keep
+    their prescribed velocity.  m is the lumped (row-sum) mass, also with consistent mass (an operator
+    split that conserves momentum, since the consistent mass rows sum to the lumped one).
+    Returns the dashpots' work on the nodes (this rank's), booked as the external work of the step is:
+    the impulse m (v - v*) times the midpoint dt (v- + v)/2 of the step's displacement increments, v- the
+    velocity before the step (v* = decay v- + gain dt a).  (Booking 1/2 m (v^2 - v*^2), the kinetic energy
+    the split removes, would miss the strain energy the extra displacement dt (v - v*) exchanges.)
+    """
+    work = 0.0
+    matrix = np.empty((3, 3))
+    tensor = np.empty((3, 3))
+    rhs = np.empty(3)
+    for k in range(damped_nodes.shape[0]):
+        node = damped_nodes[k]
+        d = dampers[k]
+        tensor[0, 0] = d[0]
+        tensor[1, 1] = d[1]
+        tensor[2, 2] = d[2]
+        tensor[1, 2] = tensor[2, 1] = d[3]
+        tensor[0, 2] = tensor[2, 0] = d[4]
+        tensor[0, 1] = tensor[1, 0] = d[5]
+        for r in range(3):
+            dof = 3 * node + r
+            if constrained[dof]:
+                for c in range(3):
+                    matrix[r, c] = 0.0
+                matrix[r, r] = 1.0
+                rhs[r] = v[dof]
+            else:
+                mass = lumped_mass[dof]
+                for c in range(3):
+                    matrix[r, c] = dt * tensor[r, c]
+                matrix[r, r] += mass
+                rhs[r] = mass * v[dof] + dt * d[6 + r]
+        # Gaussian elimination without pivoting: the matrix is symmetric positive definite on free rows
+        # (m > 0, D positive semi-definite) and the identity on constrained ones.
+        for p in range(3):
+            for r in range(p + 1, 3):
+                factor = matrix[r, p] / matrix[p, p]
+                for c in range(p, 3):
+                    matrix[r, c] -= factor * matrix[p, c]
+                rhs[r] -= factor * rhs[p]
+        for p in range(2, -1, -1):
+            total = rhs[p]
+            for c in range(p + 1, 3):
+                total -= matrix[p, c] * rhs[c]
+            rhs[p] = total / matrix[p, p]
+        for r in range(3):
+            dof = 3 * node + r
+            if constrained[dof]:
+                continue
+            change = rhs[r] - v[dof]
+            before = (v[dof] - gain * dt * acceleration[dof]) / decay
+            work += lumped_mass[dof] * change * 0.5 * (before + rhs[r])
+            u[dof] += dt * change
+            acceleration[dof] += change / (gain * dt)
+            v[dof] = rhs[r]
+    return work

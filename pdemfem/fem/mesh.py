@@ -111,6 +111,19 @@ def read_mesh_file(path: Path) -> GlobalMesh:
     return _assemble_global_mesh(source, points, tets, triangle_groups)
 
 
+def require_finite_points(source, points: np.ndarray, numbers=None) -> None:
+    """MeshError naming the first node with a NaN or infinite coordinate (it would poison every
+    element and contact it belongs to)."""
+    bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
+    if len(bad):
+        first = int(bad[0])
+        number = int(numbers[first]) if numbers is not None else first
+        raise MeshError(where=source,
+                        problem=f"{len(bad)} node(s) have a NaN or infinite coordinate (first: node {number} at "
+                                f"{points[first].tolist()})",
+                        fix="repair or re-export the mesh")
+
+
 def _no_volume_error(source, other_volume=()):
     problem = "the mesh has no volume cells (tetrahedra)"
     if other_volume:
@@ -191,6 +204,7 @@ def _assemble_global_mesh(source, points, tets, triangle_groups) -> GlobalMesh:
     used = np.unique(tets)
     renumber = np.full(len(points), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
+    require_finite_points(source, points[used], used)
     points = points[used]
     tets = renumber[tets]
     groups = {}

@@ -38,6 +38,7 @@ MASS_SOLVE_PREFIX = "fem_mass_"
 # (omega dt < 1e-2) that is ~1e-6, so 1e-8 keeps the solve below the integrator's own error.
 MASS_SOLVE_RTOL = 1e-8
 BLOWUP_CHECK_EVERY = 16  # steps between the (cheap, one norm) divergence checks
+DAMPER_COLUMNS = 9  # a node's contact dashpot: symmetric D (6) and target g (3), force g - D v
 
 
 def _sum(comm, value: float) -> float:
@@ -88,6 +89,14 @@ class Solid:
         self.constant_load_vec = self.stiffness.createVecRight()  # gravity + tractions + point forces
         self.thermal_load_vec = self.stiffness.createVecRight()
         self.nodal_force_vec = self.stiffness.createVecRight()  # external (contact) forces for the next step
+        # Contact dashpots for the next advance, per node (D_xx, D_yy, D_zz, D_yz, D_xz, D_xy, g_x, g_y, g_z).
+        self.damper_vec = PETSc.Vec().createMPI((DAMPER_COLUMNS * self.n_owned_nodes, PETSc.DECIDE),
+                                                bsize=DAMPER_COLUMNS, comm=comm)
+        self.damper_vec.zeroEntries()
+        self._damped_nodes = np.zeros(0, dtype=np.int64)
+        self._dampers = np.zeros((0, DAMPER_COLUMNS))
+        self._lumped_mass_values = self.lumped_mass.getArray(readonly=True).copy()
+        self.damper_work_local = 0.0  # work of the contact dashpots on this rank's nodes since construction [J]
         self._base_load_vec = self.stiffness.createVecRight()  # constant + thermal
         self._work_vec = self.stiffness.createVecRight()
         self.coordinates_vec = self.stiffness.createVecRight()
@@ -172,6 +181,26 @@ class Solid:
         forces = np.ascontiguousarray(forces, dtype=float).reshape(len(indices), 3)
         if len(indices):
             self.nodal_force_vec.setValuesBlocked(indices, forces.ravel(), PETSc.InsertMode.ADD_VALUES)
+
+    def add_contact_dampers(self, global_node_indices, tensors, targets) -> None:
+        """Not collective: add contact dashpots acting in the next step/advance (then cleared).
+
+        The dashpot force on node k is g_k - D_k v_k with D_k (n, 6) symmetric (xx, yy, zz, yz, xz, xy)
+        [N s/m] and g_k (n, 3) [N]; it is integrated implicitly at every FE sub-step
+        (kernels.apply_contact_dampers)."""
+        indices = np.asarray(global_node_indices, dtype=PETSc.IntType).ravel()
+        if len(indices):
+            values = np.hstack([np.asarray(tensors, float).reshape(-1, 6), np.asarray(targets, float).reshape(-1, 3)])
+            self.damper_vec.setValuesBlocked(indices, values.ravel(), PETSc.InsertMode.ADD_VALUES)
+
+    def _gather_dampers(self) -> None:
+        """Collective: route the dashpots added since the last advance to the owners; keep the damped nodes."""
+        self.damper_vec.assemble()
+        values = self.damper_vec.getArray().reshape(-1, DAMPER_COLUMNS)  # a local view: no communication
+        damped = np.flatnonzero(np.any(values != 0.0, axis=1))
+        self._damped_nodes = damped.astype(np.int64)
+        self._dampers = np.ascontiguousarray(values[damped])
+        values[damped] = 0.0
 
     def _gather_loads(self) -> None:
         """Collective: load = constant + thermal + the nodal forces added since the last step (routed to owners)."""
@@ -269,7 +298,9 @@ class Solid:
         if check_stability:
             self._check_step(dt)
         self.nodal_force_vec.assemble()  # collective: routes every rank's additions to the owners
+        self._gather_dampers()
         self._advance(dt, clear_nodal=True)
+        self._damped_nodes = self._damped_nodes[:0]
 
     def advance(self, interval: float) -> int:
         """Collective: cover `interval` with the fewest equal stable steps (sub-cycling); returns their number.
@@ -279,8 +310,10 @@ class Solid:
         substeps = max(1, math.ceil(interval / self.critical_time_step() * (1.0 - 1e-12)))
         dt = interval / substeps
         self.nodal_force_vec.assemble()
+        self._gather_dampers()
         for substep in range(substeps):
             self._advance(dt, clear_nodal=substep == substeps - 1)
+        self._damped_nodes = self._damped_nodes[:0]
         return substeps
 
     def _check_step(self, dt: float) -> None:
@@ -314,6 +347,10 @@ class Solid:
             self.nodal_force_vec.getArray(), self.load_vec.getArray(), self._inverse_lumped_mass, self._constrained,
             self._prescribed_velocity, dt, decay, gain, self.lumped, clear_nodal,
         )
+        if len(self._damped_nodes):
+            self.damper_work_local += kernels.apply_contact_dampers(
+                self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
+                self._lumped_mass_values, self._constrained, self._damped_nodes, self._dampers, dt, decay, gain)
         self.external_work += _sum(self.comm, work)
         self.time += dt
         self.step_count += 1

@@ -40,13 +40,26 @@ def rigid_body_near_nullspace(coordinates: PETSc.Vec) -> PETSc.NullSpace:
     return PETSc.NullSpace().createRigidBody(coordinates)
 
 
+def is_diagonal(matrix: PETSc.Mat) -> bool:
+    """Collective: no nonzero off-diagonal entry (||A||_F^2 equals the squared norm of its diagonal
+    up to the round-off of summing the squares, 1e-12 relative)."""
+    frobenius_squared = matrix.norm(PETSc.NormType.FROBENIUS) ** 2
+    diagonal = matrix.getDiagonal()
+    diagonal_squared = diagonal.norm() ** 2
+    diagonal.destroy()
+    return frobenius_squared - diagonal_squared <= 1e-12 * frobenius_squared
+
+
 def make_static_solver(constrained_stiffness: PETSc.Mat, coordinates: PETSc.Vec) -> PETSc.KSP:
     constrained_stiffness.setNearNullSpace(rigid_body_near_nullspace(coordinates))
     ksp = PETSc.KSP().create(comm=constrained_stiffness.getComm())
     ksp.setOptionsPrefix(OPTIONS_PREFIX)
     ksp.setOperators(constrained_stiffness)
     ksp.setType(PETSc.KSP.Type.CG)
-    ksp.getPC().setType(PETSc.PC.Type.GAMG)
+    # A fully clamped solid leaves a diagonal operator (every row a constrained identity row):
+    # GAMG finds no graph to coarsen and fails its set-up on several ranks, while Jacobi solves it
+    # exactly in one iteration.
+    ksp.getPC().setType(PETSc.PC.Type.JACOBI if is_diagonal(constrained_stiffness) else PETSc.PC.Type.GAMG)
     ksp.setTolerances(rtol=DEFAULT_RTOL, atol=1e-50, max_it=2000)
     # The true (unpreconditioned) residual, so -fem_ksp_rtol bounds the force imbalance itself.
     ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)

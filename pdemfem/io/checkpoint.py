@@ -17,7 +17,8 @@ Writing (collective):
 2. every rank writes its sorted block into ``<path>.tmp-<random>`` with the mpio
    driver at an exclusive-prefix-sum offset; the file is closed (flushed) collectively;
 3. rank 0 fsyncs it, renames it to ``path`` with os.replace (atomic), fsyncs the
-   directory, points ``latest.h5`` at it and deletes all but the newest `keep`.
+   directory, points ``latest.h5`` at it and deletes all but the newest `keep` of the
+   checkpoints this run wrote (never another run's, never the one it restarted from).
 A run killed at any instant (SIGKILL, node failure) therefore leaves at worst a stale
 ``*.tmp-*`` file (removed by the next write) and every named checkpoint whole.
 
@@ -62,6 +63,7 @@ from mpi4py import MPI
 
 from pdemfem.errors import CheckpointError
 from pdemfem.io import xdmf
+from pdemfem.io.output_guard import agree_on_error, write_error_text
 
 FORMAT_VERSION = 1
 MARKER = "pdemfem_checkpoint"
@@ -225,12 +227,19 @@ def _link_latest(path: Path) -> None:
     os.replace(temporary, latest)
 
 
-def _prune(path: Path, keep: int) -> None:
-    """Keep `path` and the newest keep-1 other checkpoint_*.h5 files (by modification time)."""
-    others = [p for p in path.parent.glob(f"{PREFIX}*.h5") if p.name != path.name]
-    others.sort(key=lambda p: p.stat().st_mtime, reverse=True)
-    for old in others[max(keep - 1, 0):]:
+# Checkpoints written by this process (resolved paths, in order), for callers that pass no list.
+_WRITTEN_BY_THIS_PROCESS: list = []
+
+
+def _prune(path: Path, keep: int, written: list) -> None:
+    """Keep `path` and the newest keep-1 other checkpoints among `written` (the paths this run
+    wrote, oldest first): a run never deletes checkpoints it did not write (another run's in a
+    shared checkpoint.dir, or the one it restarted from)."""
+    path = path.resolve()
+    mine = [p for p in dict.fromkeys(Path(p).resolve() for p in written) if p != path and p.parent == path.parent]
+    for old in mine[: max(len(mine) - (keep - 1), 0)]:
         old.unlink(missing_ok=True)
+        written[:] = [p for p in written if Path(p).resolve() != old]
 
 
 def _fsync(path: Path, directory: bool = False) -> None:
@@ -243,7 +252,8 @@ def _fsync(path: Path, directory: bool = False) -> None:
 
 def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | None = None,
                      attributes: dict | None = None, slab_arrays: dict | None = None,
-                     contact_arrays: dict | None = None, keep: int | None = None) -> Path:
+                     contact_arrays: dict | None = None, keep: int | None = None,
+                     written: list | None = None) -> Path:
     """Write one checkpoint atomically (collective); return its path.
 
     particle_arrays: this rank's owned rows per field, including int64 'ids' (unique).
@@ -255,8 +265,12 @@ def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | No
     attributes: step, time, scene_hash, rng_state (JSON text), insertion progress, ...;
         str/int/float/bool are stored as HDF5 attributes, anything else as JSON.
         format_version defaults to FORMAT_VERSION.
-    keep: if given, delete all but the newest `keep` checkpoint_*.h5 in the directory
-        and point latest.h5 at this file.
+    keep: if given, point latest.h5 at this file and delete all but the newest `keep` of the
+        checkpoints this run wrote in the directory (never another run's).
+    written: the list of checkpoint paths this run wrote (updated here; rank 0's copy counts);
+        default: the checkpoints written by this process.
+    A failed write (disk full, I/O error) raises CheckpointError on every rank and removes the
+    temporary file; the checkpoints written before stay intact.
     """
     path = Path(path)
     xdmf.prepare_directory(path.parent, comm)
@@ -272,6 +286,40 @@ def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | No
     attributes = dict(attributes or {})
     attributes.setdefault("format_version", FORMAT_VERSION)
     encoded, as_json = _encode_attributes(attributes)
+    try:
+        _write_file(temporary, comm, encoded, as_json, particle_arrays, global_arrays, slab_arrays, contact_arrays)
+        failure = None
+    except (OSError, RuntimeError) as exc:  # disk full, quota, I/O error (h5py: OSError, some RuntimeError)
+        failure = write_error_text(exc)
+    failure = agree_on_error(comm, failure)
+    if failure is not None:
+        if comm.rank == 0:
+            temporary.unlink(missing_ok=True)
+        raise CheckpointError(str(path), f"could not write the checkpoint ({failure}); the earlier checkpoints in "
+                                         f"{path.parent} are intact",
+                              "free disk space (or choose another checkpoint.dir / -o), then continue from the "
+                              "latest intact checkpoint with --restart")
+    error = None
+    if comm.rank == 0:
+        try:
+            _fsync(temporary)
+            os.replace(temporary, path)
+            _fsync(path.parent, directory=True)
+            if keep is not None:
+                written = _WRITTEN_BY_THIS_PROCESS if written is None else written
+                written.append(path)
+                _link_latest(path)
+                _prune(path, int(keep), written)
+        except OSError as exc:
+            error = str(exc)
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise CheckpointError(str(path), f"could not install the checkpoint ({error})",
+                              "check free space and permissions of checkpoint.dir")
+    return path
+
+
+def _write_file(temporary, comm, encoded, as_json, particle_arrays, global_arrays, slab_arrays, contact_arrays):
     with xdmf.open_parallel(temporary, "w", comm) as handle:
         handle.attrs[MARKER] = 1
         for name, value in encoded.items():
@@ -294,22 +342,6 @@ def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | No
             dataset = group.create_dataset(name, shape=(total, *values.shape[1:]), dtype=values.dtype)
             dataset.attrs["sum64"] = np.uint64(_sum64_global(comm, values))
             xdmf.write_slab(dataset, int(first), values)
-    error = None
-    if comm.rank == 0:
-        try:
-            _fsync(temporary)
-            os.replace(temporary, path)
-            _fsync(path.parent, directory=True)
-            if keep is not None:
-                _link_latest(path)
-                _prune(path, int(keep))
-        except OSError as exc:
-            error = str(exc)
-    error = comm.bcast(error, root=0)
-    if error is not None:
-        raise CheckpointError(str(path), f"could not install the checkpoint ({error})",
-                              "check free space and permissions of checkpoint.dir")
-    return path
 
 
 # --------------------------------------------------------------------- read
@@ -348,7 +380,22 @@ class _Bad(Exception):
 OLDER_FIX = "restart from an older checkpoint in the same directory (checkpoint_<step>.h5), or start anew"
 
 
-def _read_local(path: Path, comm, expected_hash, force: bool, expected_version: int, slab_ranges: dict):
+def _changed_physics_problem(attrs: dict, expected_hash: str, expected_physics) -> str:
+    """What changed in the scene (key: old -> new) when the checkpoint stored its scene's physics."""
+    from pdemfem.scene.loader import physics_changes
+
+    stored = attrs.get("scene_physics")
+    if isinstance(stored, dict) and isinstance(expected_physics, dict):
+        changes = physics_changes(stored, expected_physics)
+        if changes:
+            return ("the scene's physics changed since the checkpoint was written (scene hash mismatch):\n"
+                    + "\n".join(f"    {change}" for change in changes))
+    return (f"the scene's physics changed since the checkpoint was written (scene hash {attrs.get('scene_hash')}, "
+            f"this scene {expected_hash}; the checkpoint does not record which keys)")
+
+
+def _read_local(path: Path, comm, expected_hash, force: bool, expected_version: int, slab_ranges: dict,
+                expected_physics=None):
     import h5py
 
     if not path.exists():
@@ -373,14 +420,13 @@ def _read_local(path: Path, comm, expected_hash, force: bool, expected_version: 
         if version != expected_version:
             raise _Bad(f"checkpoint format version {version}, this pdemfem reads version {expected_version}",
                        "restart with the pdemfem version that wrote it, or start the run anew")
-        stored_hash = attrs.get("scene_hash")
-        if expected_hash is not None and stored_hash != expected_hash and not force:
-            raise _Bad(f"the scene's physics changed since the checkpoint was written (scene hash "
-                       f"{stored_hash}, this scene {expected_hash})",
-                       "restart with the scene that wrote it; if the change is deliberate (e.g. a new end time "
-                       "or output interval) add --force")
         for name in json.loads(attrs.pop("json_attributes", "[]")):
             attrs[name] = json.loads(attrs[name])
+        stored_hash = attrs.get("scene_hash")
+        if expected_hash is not None and stored_hash != expected_hash and not force:
+            raise _Bad(_changed_physics_problem(attrs, expected_hash, expected_physics),
+                       "restart with the scene that wrote it; if the change is deliberate add --force "
+                       "(Python: force=True); time.end, output.* and checkpoint.* may change freely")
         attrs.pop(MARKER, None)
         result = Checkpoint(path=path, attributes=attrs)
         checks = []  # (dataset path, stored sum, local sum, summed over ranks?)
@@ -408,14 +454,16 @@ def _read_local(path: Path, comm, expected_hash, force: bool, expected_version: 
 
 
 def read_checkpoint(path, comm, expected_hash: str | None = None, force: bool = False,
-                    expected_version: int = FORMAT_VERSION, slab_ranges: dict | None = None) -> Checkpoint:
+                    expected_version: int = FORMAT_VERSION, slab_ranges: dict | None = None,
+                    expected_physics: dict | None = None) -> Checkpoint:
     """Read a checkpoint for a restart on any number of ranks (collective).
 
     `path` may be a checkpoint file or its directory (then latest.h5 in it).  Returns the
     attributes, this rank's even share of the id-sorted particles and pair-sorted contacts,
     the global arrays, and the slabs (whole, or rows [first, stop) per name in slab_ranges).
     Raises CheckpointError, on every rank alike, for a missing, truncated, corrupt or
-    foreign file, another format version, or a scene hash mismatch (unless force).
+    foreign file, another format version, or a scene hash mismatch (unless force; the message
+    lists the changed keys when the file holds its scene's physics and `expected_physics` is given).
     """
     path = Path(path)
     if path.is_dir():
@@ -423,7 +471,8 @@ def read_checkpoint(path, comm, expected_hash: str | None = None, force: bool = 
     slab_ranges = dict(slab_ranges or {})
     result, checks, failure = None, [], None
     try:
-        result, checks = _read_local(path, comm, expected_hash, force, expected_version, slab_ranges)
+        result, checks = _read_local(path, comm, expected_hash, force, expected_version, slab_ranges,
+                                     expected_physics)
     except _Bad as bad:
         failure = (bad.problem, bad.fix)
     except Exception as exc:  # h5py/HDF5 errors on reading data: damaged inside

@@ -33,15 +33,17 @@ from __future__ import annotations
 import csv
 import json
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
-from pdemfem.errors import CheckpointError
+from pdemfem.errors import CheckpointError, OutputError
 from pdemfem.io import checkpoint as ckpt
 from pdemfem.io.history import HistoryWriter
-from pdemfem.scene.loader import resolve_path, scene_hash
+from pdemfem.io.output_guard import agree_on_error, prepare_output, write_error_text
+from pdemfem.scene.loader import resolve_path, scene_hash, scene_physics
 
 log = logging.getLogger("pdemfem")
 
@@ -55,16 +57,24 @@ PARTICLE_SOURCES = {"positions": "positions", "velocities": "velocities", "radii
 
 
 def checkpoint_directory(simulation) -> Path:
-    configured = simulation.scene.checkpoint.dir
+    return checkpoint_directory_of(simulation.scene, simulation.base_dir, simulation.output_dir)
+
+
+def checkpoint_directory_of(scene, base_dir, output_dir) -> Path:
+    """checkpoint.dir (relative to the scene file), default <output dir>/checkpoints."""
+    configured = scene.checkpoint.dir
     if configured is None:
-        return simulation.output_dir / "checkpoints"
-    return resolve_path(simulation.base_dir, configured).resolve()
+        return Path(output_dir) / "checkpoints"
+    return resolve_path(base_dir, configured).resolve()
 
 
 class SimulationIO:
-    def __init__(self, simulation):
+    def __init__(self, simulation, force: bool = False):
         self.sim = simulation
         self.comm = simulation.comm
+        self.force = force               # start afresh over an earlier run's results (output_guard)
+        self._output_prepared = False
+        self.written_checkpoints = []    # this run's checkpoints: the only ones pruning may delete
         self.restarted_from = None       # Checkpoint path when restored
         self.resume_step = None
         self.last_checkpoint = None      # (step, path) of the newest checkpoint written by this run
@@ -82,6 +92,7 @@ class SimulationIO:
         from pdemfem.io.solid_output import SolidOutput
 
         sim, comm = self.sim, self.comm
+        self._prepare_output()
         xdmf.prepare_directory(sim.output_dir, comm)
         columns = sim.history_columns()
         history_path = sim.output_dir / "history.csv"
@@ -100,6 +111,15 @@ class SimulationIO:
                 self._solid_outputs[name] = SolidOutput(sim.output_dir, name, comm, layout.points, layout.cells,
                                                         layout.node_offset, resume_step=self.resume_step)
 
+    def _prepare_output(self) -> None:
+        """Collective, before the first write: refuse to overwrite or mix an earlier run's files
+        unless this run continues it (restart) or starts afresh (force); see io/output_guard.py."""
+        if self._output_prepared:
+            return
+        prepare_output(self.sim.output_dir, checkpoint_directory(self.sim), self.comm,
+                       restart=self.restarted_from is not None, force=self.force, clear=True)
+        self._output_prepared = True
+
     def close(self) -> None:
         if self._history is not None:
             self._history.close()
@@ -113,13 +133,41 @@ class SimulationIO:
         if self._last_output_step == sim.step_count:
             return
         self._last_output_step = sim.step_count
-        if self._history is not None:
-            self._history.write(sim.history_row())
+        row = sim.history_row()  # collective (sums over ranks): outside the write guard
+        failure = None
+        try:
+            if self._history is not None:
+                self._history.write(row)
+        except OSError as error:  # rank 0 only: agreed on below, so no rank waits alone
+            failure = write_error_text(error)
+        self._raise_write_failure(failure, "history.csv")
+        for label, write in self._field_writers():
+            failure = None
+            try:
+                write()
+            except (OSError, RuntimeError) as error:  # disk full, quota, I/O error (h5py)
+                failure = write_error_text(error)
+            self._raise_write_failure(failure, label)
+
+    def _field_writers(self):
+        sim = self.sim
         if self._particles_out is not None:
-            self._particles_out.write(sim.time, sim.step_count, self.particle_output_arrays())
+            yield "particles.h5", lambda: self._particles_out.write(sim.time, sim.step_count,
+                                                                    self.particle_output_arrays())
         for name, writer in self._solid_outputs.items():
-            point_data, cell_data = self.solid_output_arrays(name)
-            writer.write(sim.time, sim.step_count, point_data, cell_data)
+            def write(name=name, writer=writer):
+                point_data, cell_data = self.solid_output_arrays(name)
+                writer.write(sim.time, sim.step_count, point_data, cell_data)
+            yield f"{name}.h5", write
+
+    def _raise_write_failure(self, failure, label: str) -> None:
+        """Collective: an OutputError on every rank when any rank failed to write."""
+        failure = agree_on_error(self.comm, failure)
+        if failure is not None:
+            raise OutputError(str(self.sim.output_dir / label),
+                              f"cannot write the output ({failure}) at step {self.sim.step_count}",
+                              "free disk space (or write elsewhere with -o DIR); continue from the latest "
+                              "checkpoint with --restart")
 
     def particle_output_arrays(self) -> dict:
         state = self.sim.particle_system.state
@@ -148,6 +196,7 @@ class SimulationIO:
         sim, comm = self.sim, self.comm
         if self.last_checkpoint is not None and self.last_checkpoint[0] == sim.step_count:
             return self.last_checkpoint[1]
+        self._prepare_output()
         self._sum_coupling_accumulators()
         system = sim.particle_system
         state = system.state
@@ -168,6 +217,7 @@ class SimulationIO:
         attributes = {
             "step": int(sim.step_count), "time": float(sim.time), "dt": float(sim.dt),
             "scene_hash": scene_hash(sim.scene), "scalars": scalars,
+            "scene_physics": scene_physics(sim.scene),  # so a hash mismatch can name the changed keys
             "rng_state": {"note": "all particles are inserted at t = 0 from the scene's seeds; no random "
                                   "numbers are drawn later"},
             "insertion": {"complete": True, "inserted": int(sim.inserted_count)},
@@ -177,7 +227,8 @@ class SimulationIO:
         directory = checkpoint_directory(sim)
         path = ckpt.write_checkpoint(ckpt.checkpoint_path(directory, sim.step_count), comm,
                                      particle_arrays=particles, global_arrays=globals_, attributes=attributes,
-                                     slab_arrays=slabs, contact_arrays=contacts, keep=sim.scene.checkpoint.keep)
+                                     slab_arrays=slabs, contact_arrays=contacts, keep=sim.scene.checkpoint.keep,
+                                     written=self.written_checkpoints)
         self.canonicalize()
         self.last_checkpoint = (sim.step_count, path)
         return path
@@ -192,6 +243,8 @@ class SimulationIO:
             if self.comm.size > 1:
                 self.comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
             surface.accumulated_forces[:] = total if self.comm.rank == 0 else 0.0
+            # The window's contact dashpots likewise move to rank 0, as a restart has them.
+            surface.restore_records(surface.checkpoint_records(self.comm), self.comm)
 
     def _global_state(self) -> tuple[dict, dict]:
         sim = self.sim
@@ -219,6 +272,9 @@ class SimulationIO:
             if self.comm.size > 1:
                 self.comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
             arrays[f"coupling:{surface.name}:accumulated_forces"] = total
+            arrays[f"coupling:{surface.name}:damper_records"] = surface.checkpoint_records(self.comm)
+        if sim.solids:
+            scalars["coupling"]["dashpot_dissipation"] = sim.dashpot_dissipation()
         for name, solid in sim.solids.items():
             scalars["solids"][name] = {"time": float(solid.time), "step_count": int(solid.step_count),
                                        "external_work": float(solid.external_work)}
@@ -260,9 +316,18 @@ class SimulationIO:
     def restore(self, path, force: bool = False) -> None:
         """Collective: continue from a checkpoint (any rank count); raises CheckpointError."""
         sim, comm = self.sim, self.comm
-        checkpoint = ckpt.read_checkpoint(path, comm, expected_hash=scene_hash(sim.scene), force=force)
+        checkpoint = ckpt.read_checkpoint(path, comm, expected_hash=scene_hash(sim.scene), force=force,
+                                          expected_physics=scene_physics(sim.scene))
         attributes = checkpoint.attributes
         where = str(checkpoint.path)
+        step = int(attributes["step"])
+        total_steps = int(math.ceil(sim.scene.time.end / sim.dt - 1e-9))  # as Simulation.run
+        if step >= total_steps:
+            raise CheckpointError(where, f"was written at step {step} (t = {step * sim.dt:.6g} s), at or past "
+                                         f"time.end = {sim.scene.time.end:g} s ({total_steps} steps): there is "
+                                         f"nothing left to run",
+                                  "raise time.end in the scene to continue (time.end may change on a restart "
+                                  "without --force)")
         if abs(float(attributes.get("dt", sim.dt)) - sim.dt) > 1e-12 * sim.dt:
             raise CheckpointError(where, f"written with dt = {attributes['dt']:g} s, this scene has dt = {sim.dt:g} s",
                                   "restart with the scene's original time step")
@@ -320,7 +385,13 @@ class SimulationIO:
             surface.refresh_vertices()
             stored = checkpoint.globals[f"coupling:{surface.name}:accumulated_forces"]
             surface.accumulated_forces[:] = stored if self.comm.rank == 0 else 0.0
+            surface.restore_records(checkpoint.globals[f"coupling:{surface.name}:damper_records"], self.comm)
+            surface.dissipation_correction_local = 0.0
         coupling = scalars["coupling"]
+        for solid in sim.solids.values():
+            solid.damper_work_local = 0.0
+        if sim.coupled_surfaces and self.comm.rank == 0:
+            sim.coupled_surfaces[0].dissipation_correction_local = float(coupling["dashpot_dissipation"])
         sim.coupling.steps_since_advance = int(coupling["steps_since_advance"])
         sim.coupling.fem_substeps.update({k: int(v) for k, v in coupling["fem_substeps"].items()})
         if hasattr(sim.coupling, "advances"):

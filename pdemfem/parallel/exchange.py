@@ -16,6 +16,8 @@ from mpi4py import MPI
 
 from pdemfem.parallel.decomposition import box_distance
 
+# Fixed tags are safe: the particle system talks on a private duplicate of the user's communicator
+# (pdemfem.parallel.api_safety), so no message of the user's code can match them.
 _GHOST_TAG = 71  # counts on 71, rows on 72
 _GHOST_UPDATE_TAG = 81  # rows on 82
 

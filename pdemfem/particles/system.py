@@ -21,6 +21,7 @@ so it is reordered and migrated with the particles.
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 from mpi4py import MPI
@@ -30,6 +31,7 @@ from pdemfem.neighbors.cells import cell_grid, cell_indices
 from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import recursive_bisection
 from pdemfem.parallel.exchange import GhostExchange, migrate
+from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.integrate import drift, kick
 
 log = logging.getLogger("pdemfem")
@@ -65,6 +67,9 @@ class ParticleSystem:
         self.dissipated_energy = 0.0
         self.contact_count = 0
         self.lost_particles = 0
+        self.nonfinite_particles = 0  # of lost_particles: removed because a position became inf/NaN
+        self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift
+        self.fastest_speed = 0.0  # largest particle speed at the last energies() call
         self.rebalances = 0
         largest_radius = float(state.radii.max()) if state.count else 0.0
         self.largest_radius = comm.allreduce(largest_radius, op=MPI.MAX)
@@ -94,12 +99,13 @@ class ParticleSystem:
         largest_displacement_squared = drift(owned, state.positions, state.velocities, dt, state.positions_at_build)
         if self.comm.size > 1:
             largest_displacement_squared = self.comm.allreduce(largest_displacement_squared, op=MPI.MAX)
+        # Read by the run monitor's runaway stop (same value on every rank).
+        self.largest_displacement = math.sqrt(largest_displacement_squared)
         self.walls.move(dt)
         for contributor in self.contributors:
             contributor.move(dt)
         # A pair (or particle-wall pair) can only close the skin if the two moved more than skin in sum.
-        largest_displacement = (np.sqrt(largest_displacement_squared)
-                                + self.walls.largest_displacement_since_build())
+        largest_displacement = self.largest_displacement + self.walls.largest_displacement_since_build()
         if 2.0 * largest_displacement > self.skin:
             self._rebuild()
         elif self.ghosts is not None:
@@ -212,12 +218,14 @@ class ParticleSystem:
         if np.any(bounded):
             outside |= np.any((positions < self.domain_lower) & bounded, axis=1)
             outside |= np.any((positions > self.domain_upper) & bounded, axis=1)
-        lost = int(np.count_nonzero(outside))
+        counts = np.array([np.count_nonzero(outside), np.count_nonzero(~np.all(np.isfinite(positions), axis=1))])
         if self.comm.size > 1:
-            lost = self.comm.allreduce(lost)
+            self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
+        lost, nonfinite = int(counts[0]), int(counts[1])
         if lost:
             state.keep(np.flatnonzero(~outside))
             self.lost_particles += lost
+            self.nonfinite_particles += nonfinite
         return ~outside
 
     def _sort_owned(self) -> None:
@@ -286,18 +294,17 @@ class ParticleSystem:
         return self.comm.allreduce(self.state.owned_count) if self.comm.size > 1 else self.state.owned_count
 
     def energies(self) -> dict:
+        """Energies summed over the ranks.  The same pass leaves the largest particle speed over the
+        ranks in `fastest_speed` (inf when a velocity is not finite), for the run monitor."""
         state = self.state
-        owned = slice(0, state.owned_count)
-        mass = state.mass[owned]
-        velocities = state.velocities[owned]
-        spins = state.angular_velocities[owned]
-        local = np.array([
-            0.5 * float(np.sum(mass * np.einsum("ij,ij->i", velocities, velocities))),
-            0.5 * float(np.sum(np.einsum("ij,ij->i", spins, spins) / state.inverse_inertia[owned])),
-            -float(np.sum(mass * (state.positions[owned] @ self.gravity))),
-        ])
+        kinetic, rotational, potential, fastest_squared = particle_energy_sums(
+            state.owned_count, state.mass, state.velocities, state.angular_velocities, state.inverse_inertia,
+            state.positions, self.gravity)
+        local = np.array([kinetic, rotational, potential])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+            fastest_squared = self.comm.allreduce(fastest_squared, op=MPI.MAX)
+        self.fastest_speed = float(np.sqrt(fastest_squared))
         return {
             "kinetic_energy": float(local[0]),
             "rotational_energy": float(local[1]),

@@ -18,12 +18,18 @@ import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
+from pdemfem.contact.restitution import normal_damping_coefficient
 from pdemfem.errors import SceneError
 from pdemfem.scene.schema import MaterialConfig, ParticleGroupConfig, RadiusRange, Scene, WallConfig
 
 __all__ = [
     "rayleigh_time",
     "time_step",
+    "time_step_choice",
+    "steps_per_contact_required",
+    "damping_stable_step",
+    "contact_step_limits",
+    "solids_critical_step",
     "expected_impact_speed",
     "impact_speed_estimate",
     "hertz_contact_duration",
@@ -41,8 +47,24 @@ __all__ = [
 
 # Hertz contact duration prefactor: t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5)  (DESIGN.md 1.1).
 HERTZ_DURATION_FACTOR = 2.868
-# A contact should be resolved by at least this many steps (DESIGN.md 1.1).
+# A contact is resolved by at least this many steps whatever its damping (peak force and
+# duration of an elastic contact to ~1 %).
 DT_PER_CONTACT = 30.0
+# Steps per contact for a 1 % restitution error: STEPS_PER_DAMPING * gamma_lin^1.5 (gamma_lin: the
+# calibrated damping as the linear law's coefficient).  Measured: the mean error over the touch phase
+# falls as 1/N; its 1 % crossing is at 72 gamma^1.5 (e = 0.1), 75 (0.2), 64 (0.5) for the linear law
+# and 55-61 for Hertz (docs/stability.md has the table); 80 keeps the largest, 75, 6 % inside.
+STEPS_PER_DAMPING = 80.0
+# Below this restitution the step is that of e = 0.1: the relative error then grows, but the
+# absolute error e_obtained - e stays below 1 % of 0.1 (it falls as e^(1/4) at a fixed step).
+RESTITUTION_ACCURACY_FLOOR = 0.1
+# dt auto keeps the step at half the dashpot stability limit at the expected impact speed: the
+# limit scales as v^(-1/5) (Hertz peak stiffness), so impacts up to 2^5 = 32 x faster stay stable.
+DAMPING_STABILITY_MARGIN = 0.5
+# An explicit dt above this fraction of the Rayleigh time is near the elastic wave stability limit.
+RAYLEIGH_LIMIT = 0.3
+# Poisson ratio from which a solid counts as nearly incompressible (lambda/mu >= 9; see solid_warnings).
+NEARLY_INCOMPRESSIBLE_NU = 0.45
 # A particle should move at most this fraction of its radius per step at the impact speed.
 MAX_STEP_TRAVEL = 0.1
 # Mesh walls have no thickness: warn when a particle moves more than this fraction of its radius per
@@ -107,18 +129,153 @@ def rayleigh_time(scene: Scene) -> Optional[float]:
     return min(times) if times else None
 
 
-def time_step(scene: Scene) -> float:
-    """The step: time.dt in seconds, or time.dt_factor * rayleigh_time when dt is "auto"."""
+def linear_equivalent_damping(model: str, restitution: float) -> float:
+    """The calibrated damping coefficient as the linear law's gamma (Hertz: sqrt(6/5) gamma_hertz,
+    docs/restitution.md identity 2): the measure of how hard the dashpot works during a contact."""
+    gamma = normal_damping_coefficient(model, restitution)
+    return gamma * math.sqrt(1.2) if model == "hertz_mindlin" else gamma
+
+
+def steps_per_contact_required(model: str, restitution: float) -> float:
+    """Steps per contact for the restitution to come out within 1 % (mean over where in a step the
+    contact starts): max(DT_PER_CONTACT, STEPS_PER_DAMPING * gamma_lin^1.5) with gamma_lin the
+    linear-equivalent calibrated damping of max(restitution, RESTITUTION_ACCURACY_FLOOR).
+
+    The error of a resolved contact is first order in dt (the dashpot acts for a whole step at
+    the first touch and the last one), so it falls as 1/N; STEPS_PER_DAMPING is the measured
+    1 % crossing (docs/stability.md)."""
+    gamma = linear_equivalent_damping(model, max(restitution, RESTITUTION_ACCURACY_FLOOR))
+    return max(DT_PER_CONTACT, STEPS_PER_DAMPING * gamma**1.5)
+
+
+def required_steps_per_contact(scene: Scene) -> float:
+    """The most steps per contact any pair of the scene needs (`steps_per_contact_required`)."""
+    return max((steps_per_contact_required(scene.interaction(a, b).model, scene.interaction(a, b).restitution)
+                for _, a, b, *_ in _pairs(scene)), default=DT_PER_CONTACT)
+
+
+def _peak_overlap(m_eff: float, r_eff: float, e_eff: float, speed: float) -> float:
+    """Hertz peak overlap of an elastic impact at `speed`: (15 m* v^2 / (16 E* sqrt(R*)))^(2/5)."""
+    return (15.0 * m_eff * speed**2 / (16.0 * e_eff * math.sqrt(r_eff))) ** 0.4
+
+
+def _explicit_damped_limit(omega: float, beta: float) -> float:
+    """Largest dt for which velocity Verlet on x'' = -omega^2 x - beta x' (damping on the
+    half-step velocity, as the kernel does) does not grow: (omega dt)^2 + 2 beta dt <= 4."""
+    if omega <= 0.0:
+        return math.inf
+    # Positive root of omega^2 dt^2 + 2 beta dt - 4 = 0, written without cancellation.
+    return 4.0 / (beta + math.sqrt(beta * beta + 4.0 * omega * omega))
+
+
+def damping_stable_step(scene: Scene, speed: float) -> Optional[Tuple[float, str]]:
+    """(dt, pair) below which every contact's spring-dashpot stays stable at impact speed `speed`,
+    with DAMPING_STABILITY_MARGIN applied; None without contact pairs.
+
+    Per pair the contact is linearised at the Hertz peak overlap of an impact at `speed` (the
+    stiffest point; linear law: its constant k).  Normal: omega^2 = S_n / m*, beta = gamma
+    sqrt(S_n / m*) (the dashpot is gamma sqrt(m* S_n)).  Tangential, while friction holds the
+    contact: the spring S_t and dashpot gamma sqrt(m* S_t) act on the rolling-coupled mass
+    2/7 m* of two solid spheres (or a sphere on a wall).  The step must satisfy
+    (omega dt)^2 + 2 beta dt <= 4 for both (`_explicit_damped_limit`)."""
+    if speed <= 0.0:
+        return None
+    best = None
+    for kind, name_a, name_b, m_eff, r_eff, e_eff, g_eff in _pairs(scene, with_shear=True):
+        interaction = scene.interaction(name_a, name_b)
+        gamma = normal_damping_coefficient(interaction.model, interaction.restitution)
+        delta = _peak_overlap(m_eff, r_eff, e_eff, speed)
+        if interaction.model == "linear_spring_dashpot":
+            stiffness = interaction.normal_stiffness or m_eff * speed**2 / delta**2
+            tangential = interaction.tangential_stiffness_ratio * stiffness
+        else:
+            contact_radius = math.sqrt(r_eff * delta)
+            stiffness = 2.0 * e_eff * contact_radius
+            tangential = 8.0 * g_eff * contact_radius
+        omega = math.sqrt(stiffness / m_eff)
+        limit = _explicit_damped_limit(omega, gamma * omega)
+        if interaction.friction > 0.0:
+            rolling_mass = 2.0 / 7.0 * m_eff
+            limit = min(limit, _explicit_damped_limit(math.sqrt(tangential / rolling_mass),
+                                                      gamma * math.sqrt(m_eff * tangential) / rolling_mass))
+        limit *= DAMPING_STABILITY_MARGIN
+        if best is None or limit < best[0]:
+            best = (limit, f"{name_a}-{name_b} ({interaction.model}, restitution {interaction.restitution:g})")
+    return best
+
+
+def contact_step_limits(scene: Scene, speed: float) -> List[Tuple[float, str]]:
+    """[(dt limit, why)] a contact at impact speed `speed` puts on the step: its duration over the
+    steps it needs (`steps_per_contact_required`), and dashpot stability (`damping_stable_step`)."""
+    limits = []
+    if speed <= 0.0:
+        return limits
+    for kind, name_a, name_b, m_eff, r_eff, e_eff in _pairs(scene):
+        interaction = scene.interaction(name_a, name_b)
+        duration = _pair_duration(interaction, m_eff, r_eff, e_eff, speed)
+        steps = steps_per_contact_required(interaction.model, interaction.restitution)
+        limits.append((duration / steps, f"{steps:.0f} steps per {kind.replace('_', '-')} contact "
+                                         f"({name_a}-{name_b}, {duration:.3g} s at {speed:.3g} m/s, "
+                                         f"restitution {interaction.restitution:g})"))
+    stable = damping_stable_step(scene, speed)
+    if stable is not None:
+        limits.append((stable[0], f"dashpot stability of {stable[1]}"))
+    return limits
+
+
+def time_step_choice(scene: Scene, solid_critical_step: Optional[float] = None) -> Tuple[float, str]:
+    """(dt, what set it).  time.dt when given.  "auto" with particles: the smallest of
+    dt_factor x Rayleigh time and the contact limits at the expected impact speed
+    (`contact_step_limits`).  "auto" without particles: the solids' FE critical step
+    (`solid_critical_step`, the smallest over the solids; the FE advance sub-steps below it)."""
     if scene.time.dt != "auto":
-        return float(scene.time.dt)
+        return float(scene.time.dt), "time.dt"
     rayleigh = rayleigh_time(scene)
     if rayleigh is None:
+        if scene.solids and solid_critical_step is not None:
+            return float(solid_critical_step), "the solids' FE critical step"
         raise SceneError(
             "time.dt",
-            'dt "auto" derives the step from the particles, but the scene has none',
+            'dt "auto" derives the step from the particles or the solids, but the scene has neither'
+            if not scene.solids else 'dt "auto" without particles needs the solids\' critical step',
             "give time.dt in seconds",
         )
-    return scene.time.dt_factor * rayleigh
+    choices = [(scene.time.dt_factor * rayleigh,
+                f"dt_factor {scene.time.dt_factor:g} x Rayleigh time {rayleigh:.3g} s")]
+    speed = expected_impact_speed(scene)
+    if not math.isfinite(speed):
+        raise SceneError("time.dt", f'dt "auto" cannot resolve contacts at the impact speed {speed:g} m/s',
+                         "check the particles' initial velocities (their squares overflow) and "
+                         "time.expected_impact_speed")
+    choices += contact_step_limits(scene, speed)
+    dt, why = min(choices, key=lambda choice: choice[0])
+    if not (dt > 0.0 and math.isfinite(dt)):
+        raise SceneError("time.dt", f'dt "auto" comes out as {dt:g} s from the {why} at the impact speed {speed:g} m/s',
+                         "check the particles' initial velocities and time.expected_impact_speed, or give time.dt")
+    return dt, why
+
+
+def time_step(scene: Scene, solid_critical_step: Optional[float] = None, base_dir=None) -> float:
+    """The step: time.dt in seconds, or the "auto" step of `time_step_choice`.  A scene with
+    solids and no particles needs the solids' critical step: pass it, or `base_dir` to build the
+    solids here (on this process only)."""
+    if (scene.time.dt == "auto" and solid_critical_step is None and not scene.particles and scene.solids):
+        solid_critical_step = solids_critical_step(scene, base_dir)
+    return time_step_choice(scene, solid_critical_step)[0]
+
+
+def solids_critical_step(scene: Scene, base_dir=None) -> Optional[float]:
+    """Smallest FE critical step over the scene's solids (builds them on this process only)."""
+    if not scene.solids:
+        return None
+    from mpi4py import MPI
+
+    from pdemfem.fem.solid import Solid
+
+    steps = [Solid(config, scene.materials[config.material], gravity=scene.gravity, comm=MPI.COMM_SELF,
+                   base_dir=base_dir if base_dir is not None else ".").critical_time_step()
+             for config in scene.solids]
+    return min(steps)
 
 
 # --------------------------------------------------------------------------- impact speed
@@ -316,9 +473,14 @@ def _hertz_duration(m_eff: float, r_eff: float, e_eff: float, speed: float) -> f
     return HERTZ_DURATION_FACTOR * (m_eff**2 / (r_eff * e_eff**2 * speed)) ** 0.2
 
 
-def _pairs(scene: Scene):
-    """(kind, material_a, material_b, m*, R*, E*) for the smallest particle of each pair of groups
-    and each group against each wall."""
+def _effective_shear_modulus(a: MaterialConfig, b: MaterialConfig) -> float:
+    """1/G* = 2 (2 - nu_a)(1 + nu_a)/E_a + 2 (2 - nu_b)(1 + nu_b)/E_b (as the contact tables)."""
+    return 1.0 / sum(2.0 * (2.0 - m.poisson_ratio) * (1.0 + m.poisson_ratio) / m.youngs_modulus for m in (a, b))
+
+
+def _pairs(scene: Scene, with_shear: bool = False):
+    """(kind, material_a, material_b, m*, R*, E*[, G*]) for the smallest particle of each pair of groups
+    and each group against each wall and each contact solid."""
     smallest = []
     for group, count in zip(scene.particles, group_counts(scene)):
         material = scene.materials[group.material]
@@ -328,9 +490,14 @@ def _pairs(scene: Scene):
         for j, (name_b, b, r_b, m_b, count_b) in enumerate(smallest[i:], start=i):
             if count_a == 0 or count_b == 0 or (i == j and count_a < 2):
                 continue  # no such pair in the scene
-            yield ("particle_particle", name_a, name_b, m_a * m_b / (m_a + m_b), r_a * r_b / (r_a + r_b),
-                   _effective_modulus(a, b))
-        for wall in scene.walls:
+            pair = ("particle_particle", name_a, name_b, m_a * m_b / (m_a + m_b), r_a * r_b / (r_a + r_b),
+                    _effective_modulus(a, b))
+            yield pair + (_effective_shear_modulus(a, b),) if with_shear else pair
+        if count_a == 0:
+            continue
+        # Solids' contact surfaces are walls to the particle (their mass is far larger).
+        surfaces = list(scene.walls) + [solid for solid in scene.solids if solid.contact]
+        for wall in surfaces:
             w = scene.materials[wall.material]
             # A wall has m = inf, so m* = m.  Flat (planes, mesh faces) and concave (inside a
             # cylinder) walls are taken as flat, R* = r, the shorter contact; the outside of a
@@ -338,7 +505,8 @@ def _pairs(scene: Scene):
             r_eff = r_a
             if getattr(wall, "kind", "plane") == "cylinder" and not getattr(wall, "inside", True) and wall.radius:
                 r_eff = r_a * wall.radius / (r_a + wall.radius)
-            yield "particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, w)
+            pair = ("particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, w))
+            yield pair + (_effective_shear_modulus(a, w),) if with_shear else pair
 
 
 def hertz_contact_duration(scene: Scene, speed: float) -> ContactDurations:
@@ -358,6 +526,15 @@ def hertz_contact_duration(scene: Scene, speed: float) -> ContactDurations:
     return ContactDurations(**best)
 
 
+def _pair_duration(interaction, m_eff: float, r_eff: float, e_eff: float, speed: float) -> float:
+    """Contact duration of one pair at impact speed `speed` for the model it uses (`contact_duration`)."""
+    if interaction.model == "linear_spring_dashpot":
+        if interaction.normal_stiffness is not None:
+            return math.pi * math.sqrt(m_eff / interaction.normal_stiffness)
+        return math.pi * _peak_overlap(m_eff, r_eff, e_eff, speed) / speed
+    return _hertz_duration(m_eff, r_eff, e_eff, speed)
+
+
 def contact_duration(scene: Scene, speed: float) -> ContactDurations:
     """Shortest contact durations for the model each pair uses.
 
@@ -371,15 +548,7 @@ def contact_duration(scene: Scene, speed: float) -> ContactDurations:
         raise ValueError("impact speed must be positive")
     best = {"particle_particle": None, "particle_wall": None}
     for kind, name_a, name_b, m_eff, r_eff, e_eff in _pairs(scene):
-        interaction = scene.interaction(name_a, name_b)
-        if interaction.model == "linear_spring_dashpot":
-            if interaction.normal_stiffness is not None:
-                value = math.pi * math.sqrt(m_eff / interaction.normal_stiffness)
-            else:
-                delta_max = (15.0 * m_eff * speed**2 / (16.0 * e_eff * math.sqrt(r_eff))) ** 0.4
-                value = math.pi * delta_max / speed
-        else:
-            value = _hertz_duration(m_eff, r_eff, e_eff, speed)
+        value = _pair_duration(scene.interaction(name_a, name_b), m_eff, r_eff, e_eff, speed)
         if best[kind] is None or value < best[kind]:
             best[kind] = value
     return ContactDurations(**best)
@@ -419,36 +588,51 @@ def _format_seconds(value: float) -> str:
     return f"{value:.3g} s"
 
 
-def warnings(scene: Scene) -> List[str]:
-    """Plain-language warnings about accuracy or cost; an empty list when none.
+def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[str]:
+    """Plain-language warnings about accuracy, stability or cost; an empty list when none.
 
-    Not errors: the scene runs, but probably not as intended.
+    Not errors: the scene runs, but probably not as intended.  `pdemfem check` prints them and
+    `pdemfem run` repeats them before the first step.
     """
-    found: List[str] = []
+    found: List[str] = list(solid_warnings(scene))
     count = particle_count(scene)
     if count == 0:
         found.append("the scene has no particles")
         return found
     try:
-        dt = time_step(scene)
+        dt = time_step(scene, solid_critical_step)
     except SceneError:
         return found
     rayleigh = rayleigh_time(scene)
-    if scene.time.dt != "auto" and rayleigh is not None and dt > 0.3 * rayleigh:
+    if scene.time.dt != "auto" and rayleigh is not None and dt > RAYLEIGH_LIMIT * rayleigh:
         found.append(
-            f"time.dt = {dt:.3g} s is {dt / rayleigh:.2f} x the Rayleigh time {rayleigh:.3g} s; above ~0.3 the "
-            f"explicit integration may be unstable (use dt: auto, or dt <= {0.2 * rayleigh:.3g} s)"
+            f"time.dt = {dt:.3g} s is {dt / rayleigh:.2f} x the Rayleigh time {rayleigh:.3g} s; "
+            f"above ~{RAYLEIGH_LIMIT} the explicit integration may be unstable (use dt: auto, or "
+            f"dt <= {0.2 * rayleigh:.3g} s)"
         )
     speed, _ = impact_speed_estimate(scene)
     smallest_radius = min(group_radius_range(group)[0] for group in scene.particles)
+    if not math.isfinite(speed):
+        found.append(f"the impact speed is {speed:g} m/s: an initial velocity's square overflows; the run stops "
+                     f"at once (non-finite energy): check the particles' initial velocities")
+        return found
     if speed > 0.0:
-        durations = contact_duration(scene, speed)
-        shortest = durations.shortest
-        if shortest is not None and dt > shortest / DT_PER_CONTACT:
-            found.append(
-                f"dt = {dt:.3g} s resolves the shortest contact ({shortest:.3g} s at {speed:.3g} m/s) with only "
-                f"{shortest / dt:.1f} steps (want >= {DT_PER_CONTACT:.0f}): lower time.dt_factor or time.dt"
-            )
+        limits = contact_step_limits(scene, speed)
+        # The binding (smallest) limit of each kind: resolution and dashpot stability.
+        binding = [min(((limit, why) for limit, why in limits if why.startswith("dashpot") == dashpot),
+                       default=None) for dashpot in (False, True)]
+        for limit, why in [choice for choice in binding if choice is not None]:
+            if dt > limit * (1.0 + 1e-9):  # 1e-9: dt auto equals its binding limit up to round-off
+                if why.startswith("dashpot"):
+                    found.append(
+                        f"dt = {dt:.3g} s is above the {why}: the contact can gain energy and blow up "
+                        f"(need dt <= {limit:.3g} s at {speed:.3g} m/s; use dt: auto, or raise the restitution)"
+                    )
+                else:
+                    found.append(
+                        f"dt = {dt:.3g} s is above the {why} (need dt <= {limit:.3g} s): the restitution comes out "
+                        f"wrong by more than 1 %; use dt: auto, or lower time.dt_factor or time.dt"
+                    )
         if speed * dt > MAX_STEP_TRAVEL * smallest_radius:
             found.append(
                 f"at the impact speed {speed:.3g} m/s a particle moves {speed * dt / smallest_radius:.2f} radii per "
@@ -481,15 +665,53 @@ def warnings(scene: Scene) -> List[str]:
             "time.expected_impact_speed to the largest speed at which particles hit them"
         )
     found.extend(_tunnelling_warnings(scene, speed, dt, smallest_radius))
+    for ratio, label in thin_surface_overlaps(scene, speed):
+        if ratio > 1.0:
+            found.append(f"{label}: at {speed:.3g} m/s the peak overlap is {ratio:.2g} radii, so the sphere passes "
+                         f"through the thin surface whatever the step (the run stops when it happens): use stiffer "
+                         f"materials (youngs_modulus) or lower the impact speed")
+    found.extend(start_inside_walls(scene))
+    return found
+
+
+def start_inside_walls(scene: Scene) -> List[str]:
+    """Groups whose particles can start touching or behind a plane wall (the wall pushes them
+    out with the energy of the whole overlap)."""
+    found = []
     for index, group in enumerate(scene.particles):
         _, largest = group_radius_range(group)
         for wall in _plane_walls(scene):
-            outside = _points_behind_wall(group, wall, largest)
-            if outside:
+            if _points_behind_wall(group, wall, largest):
                 found.append(
                     f"particles[{index}] ({group.name}) starts partly behind or inside wall '{wall.name}' "
                     f"(normal points into the domain): move the region or the wall"
                 )
+    return found
+
+
+def lame_ratio(poisson_ratio: float) -> float:
+    """lambda / mu = 2 nu / (1 - 2 nu): how much stiffer the material is in volume than in shear."""
+    return 2.0 * poisson_ratio / (1.0 - 2.0 * poisson_ratio)
+
+
+def solid_warnings(scene: Scene) -> List[str]:
+    """Nearly incompressible solids: P1 tetrahedra lock (too stiff in bending and shear) and the
+    explicit critical step, ~ h / sqrt((lambda + 2 mu) / rho), shrinks against the shear waves
+    that carry the physics by sqrt((lambda + 2 mu) / mu) = sqrt(2 (1 - nu) / (1 - 2 nu))."""
+    found = []
+    for index, solid in enumerate(scene.solids):
+        nu = scene.materials[solid.material].poisson_ratio
+        if nu < NEARLY_INCOMPRESSIBLE_NU:
+            continue
+        ratio = lame_ratio(nu)
+        slowdown = math.sqrt(2.0 * (1.0 - nu) / (1.0 - 2.0 * nu)) / math.sqrt(2.0 * (1.0 - 0.3) / (1.0 - 0.6))
+        text = (f"solids[{index}] ({solid.name}): poisson_ratio {nu:g} of material '{solid.material}' is nearly "
+                f"incompressible (lambda/mu = {ratio:.3g}, >= {lame_ratio(NEARLY_INCOMPRESSIBLE_NU):.0f} from nu = "
+                f"{NEARLY_INCOMPRESSIBLE_NU}): the FE critical step is {slowdown:.3g} x smaller than at nu = 0.3 and "
+                f"the static solve needs more iterations")
+        if solid.element == "P1":
+            text += "; linear tetrahedra (P1) lock and come out too stiff: use element: P2"
+        found.append(text)
     return found
 
 
@@ -509,20 +731,39 @@ def _plane_walls(scene: Scene) -> List[WallConfig]:
 
 
 def _tunnelling_warnings(scene: Scene, speed: float, dt: float, smallest_radius: float) -> List[str]:
-    """Mesh walls are thin: a sphere whose centre crosses a triangle's plane within one step is
-    pushed out on the far side (two-sided) or not at all (one-sided).  Warn when the travel per
-    step at the impact speed plus the wall's own speed exceeds TUNNEL_TRAVEL radii."""
+    """Mesh walls and the solids' contact surfaces are thin: a sphere whose centre crosses a
+    triangle's plane within one step is pushed out on the far side (two-sided) or not at all
+    (one-sided).  Warn when the travel per step at the impact speed plus the surface's own speed
+    exceeds TUNNEL_TRAVEL radii (the run stops when a particle really moves that fast)."""
     found = []
-    for wall in scene.walls:
-        if wall.kind != "mesh":
-            continue
-        travel = (speed + _norm(wall.velocity)) * dt
+    surfaces = [(f"mesh wall '{wall.name}'", _norm(wall.velocity)) for wall in scene.walls if wall.kind == "mesh"]
+    surfaces += [(f"solid '{solid.name}' (contact {', '.join(solid.contact)})", 0.0)
+                 for solid in scene.solids if solid.contact]
+    for label, surface_speed in surfaces:
+        travel = (speed + surface_speed) * dt
         if travel > TUNNEL_TRAVEL * smallest_radius:
             found.append(
-                f"mesh wall '{wall.name}': at {speed + _norm(wall.velocity):.3g} m/s (impact + wall speed) a particle "
-                f"moves {travel / smallest_radius:.2f} radii per step (want <= {TUNNEL_TRAVEL}); it can tunnel through "
-                f"the thin mesh: lower time.dt / time.dt_factor, or set time.expected_impact_speed if it is lower"
+                f"{label}: at {speed + surface_speed:.3g} m/s (impact + surface speed) a particle moves "
+                f"{travel / smallest_radius:.2f} radii per step (want <= {TUNNEL_TRAVEL}); it can tunnel through "
+                f"the thin surface and the run stops when it does: use dt: auto, lower time.dt, or set "
+                f"time.expected_impact_speed if it is lower"
             )
+    return found
+
+
+def thin_surface_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str]]:
+    """[(peak overlap / radius, label)] of an impact at `speed` on each thin surface (mesh walls, the
+    solids' contact surfaces).  delta_max / r = (15 m v^2 / (16 E* sqrt(r)))^(2/5) / r does not depend
+    on r (m ~ r^3); above 1 the sphere's centre reaches the surface before the contact stops it, so
+    it passes through whatever the step (the Hertz law has left its range long before)."""
+    thin = {wall.material for wall in scene.walls if wall.kind == "mesh"}
+    thin |= {solid.material for solid in scene.solids if solid.contact}
+    found = []
+    if speed <= 0.0 or not math.isfinite(speed):
+        return found
+    for kind, name_a, name_b, m_eff, r_eff, e_eff in _pairs(scene):
+        if kind == "particle_wall" and name_b in thin:
+            found.append((_peak_overlap(m_eff, r_eff, e_eff, speed) / r_eff, f"{name_a} on {name_b}"))
     return found
 
 

@@ -36,6 +36,8 @@ __all__ = [
     "resolve_path",
     "output_directory",
     "scene_hash",
+    "scene_physics",
+    "physics_changes",
     "format_key_path",
     "key_line",
     "FILE_KEYS",
@@ -138,20 +140,19 @@ def output_directory(
     scene: Scene, base_dir: Union[str, os.PathLike], override: Optional[Union[str, os.PathLike]] = None
 ) -> Path:
     """Where a run writes: ``override`` (the CLI's ``-o``, relative to the current
-    directory) if given, else ``output.dir`` resolved relative to the scene file."""
+    directory) if given, else ``output.dir`` resolved relative to the scene file.  An empty
+    override is an error: it would silently mean the current directory."""
+    if override is not None and not str(override).strip():
+        raise SceneError("output directory (-o / output_dir)", "is empty",
+                         "give a directory name, e.g. -o out/run1, or leave it out to use the scene's output.dir")
     if override is not None:
         return Path(override).expanduser().resolve()
     return resolve_path(base_dir, scene.output.dir).resolve()
 
 
-def scene_hash(scene: Union[Scene, Dict[str, Any]]) -> str:
-    """sha256 (hex) of the scene's physics: everything except time.end, output.* and checkpoint.*.
-
-    Canonical form: the validated model with defaults filled in, dumped to JSON
-    with sorted keys, so key order, spelling of numbers (1e-3 vs 0.001) and
-    omitted defaults do not change the hash.  Two scenes with the same hash
-    continue each other's checkpoints.
-    """
+def scene_physics(scene: Union[Scene, Dict[str, Any]]) -> Dict[str, Any]:
+    """The scene's physics as plain data: the validated model with defaults filled in, without
+    time.end, output.* and checkpoint.* (what `scene_hash` fingerprints)."""
     if not isinstance(scene, Scene):
         scene, _ = load_scene(scene)
     content = scene.model_dump(mode="json")
@@ -162,8 +163,50 @@ def scene_hash(scene: Union[Scene, Dict[str, Any]]) -> str:
             node = node.get(key, {}) if isinstance(node, dict) else {}
         if isinstance(node, dict):
             node.pop(last, None)
-    text = json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=True)
+    return content
+
+
+def scene_hash(scene: Union[Scene, Dict[str, Any]]) -> str:
+    """sha256 (hex) of the scene's physics: everything except time.end, output.* and checkpoint.*.
+
+    Canonical form: the validated model with defaults filled in, dumped to JSON
+    with sorted keys, so key order, spelling of numbers (1e-3 vs 0.001) and
+    omitted defaults do not change the hash.  Two scenes with the same hash
+    continue each other's checkpoints.
+    """
+    text = json.dumps(scene_physics(scene), sort_keys=True, separators=(",", ":"), allow_nan=True)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def physics_changes(old: Any, new: Any, path: KeyPath = (), limit: int = 8) -> List[str]:
+    """'key: old -> new' for every value that differs between two `scene_physics` dicts
+    (at most `limit`, then '... and N more')."""
+    changes: List[str] = []
+    _collect_changes(old, new, path, changes)
+    if len(changes) > limit:
+        changes = changes[:limit] + [f"... and {len(changes) - limit} more"]
+    return changes
+
+
+def _collect_changes(old: Any, new: Any, path: KeyPath, changes: List[str]) -> None:
+    if isinstance(old, dict) and isinstance(new, dict):
+        for key in list(old) + [key for key in new if key not in old]:
+            if key not in new:
+                changes.append(f"{format_key_path(path + (key,))}: removed (was {_short(old[key])})")
+            elif key not in old:
+                changes.append(f"{format_key_path(path + (key,))}: added ({_short(new[key])})")
+            else:
+                _collect_changes(old[key], new[key], path + (key,), changes)
+    elif isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        for index, (a, b) in enumerate(zip(old, new)):
+            _collect_changes(a, b, path + (index,), changes)
+    elif old != new:
+        changes.append(f"{format_key_path(path)}: {_short(old)} -> {_short(new)}")
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def key_line(scene_file: Union[str, os.PathLike], key: str) -> Optional[int]:
@@ -490,6 +533,8 @@ def _one_problem(path: KeyPath, item: dict, data: Any) -> _Problem:
         name = str(path[-1]) if path else str(value)
         return _Problem(path[:-1] + (name,), f"key {name} is not a name",
                         "keys are names such as time or materials; rename it (or quote it: '1')")
+    if kind == "string_too_short":
+        return _Problem(path, "is empty", f"give {key} a value (a name or a path relative to the scene file)")
     if kind in ("too_long", "too_short"):
         expected = item.get("ctx", {}).get("max_length" if kind == "too_long" else "min_length")
         count = item.get("ctx", {}).get("actual_length")

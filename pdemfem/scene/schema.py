@@ -178,8 +178,12 @@ ParticleOutputField = Literal["positions", "velocities", "radii", "ids", "forces
 SolidOutputField = Literal["displacements", "velocities", "von_mises", "temperature"]
 
 
+# A directory key: "" would silently mean the current directory.
+DirectoryName = Annotated[str, Field(min_length=1)]
+
+
 class OutputConfig(StrictModel):
-    dir: str = "out"
+    dir: DirectoryName = "out"
     every: Optional[PositiveFloat] = Field(None, description="output interval [s]; default end/100")
     particles: List[ParticleOutputField] = Field(
         default_factory=lambda: ["positions", "velocities", "radii", "ids", "forces", "temperature"],
@@ -193,7 +197,7 @@ class CheckpointConfig(StrictModel):
     every: Optional[PositiveFloat] = Field(
         None, description="checkpoint interval [s] (rounded to whole steps); none: only on SIGTERM/SIGUSR1 and at the end")
     keep: Annotated[int, Field(ge=1)] = Field(2, description="newest checkpoints kept (older ones are deleted)")
-    dir: Optional[str] = Field(None, description="checkpoint directory; default <output dir>/checkpoints")
+    dir: Optional[DirectoryName] = Field(None, description="checkpoint directory; default <output dir>/checkpoints")
 
 
 class NeighborConfig(StrictModel):

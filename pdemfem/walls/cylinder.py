@@ -92,7 +92,7 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         sx = velocity[0] + angular_velocity[1] * az - angular_velocity[2] * ay
         sy = velocity[1] + angular_velocity[2] * ax - angular_velocity[0] * az
         sz = velocity[2] + angular_velocity[0] * ay - angular_velocity[1] * ax
-        fx, fy, fz, mx, my, mz, elastic, dissipated = rigid_wall_contact(
+        fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = rigid_wall_contact(
             i, nx, ny, nz, distance, sx, sy, sz, wall_material, history[i], 0, velocities, angular_velocities,
             radii, mass, inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping,
             friction, rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt,

@@ -37,7 +37,8 @@ from mpi4py import MPI
 from numba import njit
 
 from pdemfem.walls.bvh import BVH
-from pdemfem.walls.triangle_contact import SLOT_COLUMNS, largest_displacement, mesh_contact_forces
+from pdemfem.walls.triangle_contact import (DAMPING_RECORD_COLUMNS, SLOT_COLUMNS, largest_displacement,
+                                           mesh_contact_forces)
 
 # History slots per particle and mesh: the most patches one sphere touches at once with history
 # (a sphere in a box corner touches 3); a 5th simultaneous contact would run without history.
@@ -223,7 +224,8 @@ class TriangleSurface(ContributorWall):
         capacity = max(int(capacity), 1)
         self._records = SimpleNamespace(
             particle=np.zeros(capacity, dtype=np.int64), triangle=np.zeros(capacity, dtype=np.int32),
-            weights=np.zeros((capacity, 3)), point=np.zeros((capacity, 3)), force=np.zeros((capacity, 3)))
+            weights=np.zeros((capacity, 3)), point=np.zeros((capacity, 3)), force=np.zeros((capacity, 3)),
+            damping=np.zeros((capacity, DAMPING_RECORD_COLUMNS)))
 
     def _lists_valid(self, state, first: int, last: int, skin: float) -> bool:
         if self._list_key != (id(state.ids), state.count, first, last):
@@ -277,7 +279,7 @@ class TriangleSurface(ContributorWall):
             tables.rolling_friction, tables.model_code, tables.normal_stiffness, tables.tangential_ratio,
             tables.characteristic_speed, system.dt, tables.rolling_enabled,
             state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,
-            records.particle, records.triangle, records.weights, records.point, records.force,
+            records.particle, records.triangle, records.weights, records.point, records.force, records.damping,
             self._scratch_int, self._scratch_float, self._spare_history)
         self.contact_count = int(contacts)
         self._step_work = float(work)
@@ -287,11 +289,12 @@ class TriangleSurface(ContributorWall):
     @property
     def contacts(self) -> SimpleNamespace:
         """This rank's contacts of the last force evaluation (views): particle index, triangle,
-        barycentric weights of the contact point, contact point, force on the surface."""
+        barycentric weights of the contact point, contact point, force on the surface, and the
+        dashpot record (c_n, c_t, normal, lever, particle and surface velocity at the contact point)."""
         n = min(self.contact_count, len(self._records.particle))
         r = self._records
         return SimpleNamespace(particle=r.particle[:n], triangle=r.triangle[:n], weights=r.weights[:n],
-                               point=r.point[:n], force=r.force[:n])
+                               point=r.point[:n], force=r.force[:n], damping=r.damping[:n])
 
 
 class MeshWall(TriangleSurface):

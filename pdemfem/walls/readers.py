@@ -45,7 +45,17 @@ def read_surface(path, scale: float = 1.0):
     points = np.asarray(mesh.points, dtype=np.float64)
     if points.shape[1] == 2:
         points = np.column_stack([points, np.zeros(len(points))])
-    return clean_surface(points[:, :3] * float(scale), triangles)
+    points = points[:, :3] * float(scale)
+    # One NaN vertex would make the welding and the BVH treat the whole surface as absent:
+    # every particle falls through the wall.
+    used = np.unique(triangles)
+    bad = used[~np.isfinite(points[used]).all(axis=1)]
+    if len(bad):
+        raise MeshError(str(path), f"{len(bad)} vertex(es) have a NaN or infinite coordinate (first: vertex "
+                                   f"{int(bad[0])} at {points[bad[0]].tolist()}"
+                                   + (f" after scale {scale:g}" if scale != 1.0 else "") + ")",
+                        "repair or re-export the surface mesh")
+    return clean_surface(points, triangles)
 
 
 def clean_surface(vertices, triangles):

@@ -54,6 +54,9 @@ REGION_VERTEX_C = 6
 
 # Columns of the per-particle slot history: tangential spring xi (3) and the overlap of the last step.
 SLOT_COLUMNS = 4
+# Columns of a contact's dashpot record: c_n, c_t, normal (3), lever, particle contact-point velocity (3),
+# surface velocity at the contact point (3).
+DAMPING_RECORD_COLUMNS = 12
 
 
 @njit(inline="always", cache=True)
@@ -136,13 +139,15 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt, rolling_enabled,
                         forces, torques, totals, spread_to_vertices, vertex_forces,
                         record_particle, record_triangle, record_weights, record_point, record_force,
-                        scratch_int, scratch_float, spare_history):
+                        record_damping, scratch_int, scratch_float, spare_history):
     """Add the mesh-wall contact forces of particles [first, last).
 
     totals[0:3] += force on the wall, totals[3:6] += its moment about the origin
     (sum of q x F_wall minus the rolling couples).  One record per contact
     (particle index, triangle, barycentric weights, contact point, force on the
-    wall).  scratch_int (M, 5) / scratch_float (M, 8) hold the per-patch
+    wall, and in record_damping the contact's dashpot: c_n, c_t, normal (3), lever (the contact
+    point lies lever * normal below the centre), the particle's contact-point velocity (3) and the
+    surface velocity there (3), see pdemfem.coupling.dampers).  scratch_int (M, 5) / scratch_float (M, 8) hold the per-patch
     proposals of one particle (M >= the longest candidate list).
     Returns (elastic, dissipated, contacts, work done on the particles by the wall).
     """
@@ -338,7 +343,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
             sx = wa * vertex_velocities[a, 0] + wb * vertex_velocities[b, 0] + wc * vertex_velocities[c, 0]
             sy = wa * vertex_velocities[a, 1] + wb * vertex_velocities[b, 1] + wc * vertex_velocities[c, 1]
             sz = wa * vertex_velocities[a, 2] + wb * vertex_velocities[b, 2] + wc * vertex_velocities[c, 2]
-            fx, fy, fz, mx, my, mz, elastic, dissipated = rigid_wall_contact(
+            fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = rigid_wall_contact(
                 i, nx, ny, nz, distance, sx, sy, sz, wall_material, history, slot, velocities, angular_velocities,
                 radii, mass, inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping,
                 friction, rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed,
@@ -366,6 +371,21 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 record_force[contacts, 0] = -fx
                 record_force[contacts, 1] = -fy
                 record_force[contacts, 2] = -fz
+                record_damping[contacts, 0] = normal_damping
+                record_damping[contacts, 1] = tangential_damping
+                record_damping[contacts, 2] = nx
+                record_damping[contacts, 3] = ny
+                record_damping[contacts, 4] = nz
+                record_damping[contacts, 5] = distance
+                wx = angular_velocities[i, 0]
+                wy = angular_velocities[i, 1]
+                wz = angular_velocities[i, 2]
+                record_damping[contacts, 6] = velocities[i, 0] - distance * (wy * nz - wz * ny)
+                record_damping[contacts, 7] = velocities[i, 1] - distance * (wz * nx - wx * nz)
+                record_damping[contacts, 8] = velocities[i, 2] - distance * (wx * ny - wy * nx)
+                record_damping[contacts, 9] = sx
+                record_damping[contacts, 10] = sy
+                record_damping[contacts, 11] = sz
             if spread_to_vertices:
                 vertex_forces[a, 0] -= wa * fx
                 vertex_forces[a, 1] -= wa * fy

@@ -6,13 +6,24 @@ from fem_helpers import box_solid, dense, material
 from pdemfem.errors import SolverError
 
 
+def front_tail_envelope(h: float, courant: float, travelled: float, distances, spacing: float) -> float:
+    """Envelope of the probe error of test_longitudinal_wave_travels_at_bar_speed: the dispersion tail of the
+    discrete front.  Central difference with lumped mass on a 1-D chain has omega = ck - beta k^3 with
+    beta = c h^2 (1 - C^2) / 24 (C the Courant number): the long waves travel at exactly c, the short ones lag,
+    and a velocity step spreads into an Airy profile of width w = (c t h^2 (1 - C^2) / 8)^(1/3) whose total
+    displacement defect is zero.  At s = d / w widths behind the front the displacement error is
+    v0 w / c * int_s^inf of the Airy tail <= v0 w / c * s^(-5/4) / sqrt(pi), so the relative error of
+    u1 - u2 = v0 spacing / c is at most (w / spacing) sum_probes s^(-5/4) / sqrt(pi)."""
+    width = (travelled * h**2 * (1.0 - courant**2) / 8.0) ** (1.0 / 3.0)
+    return width / spacing * sum((d / width) ** -1.25 for d in distances) / np.sqrt(np.pi)
+
+
 def test_longitudinal_wave_travels_at_bar_speed():
     # 1-D setting: nu = 0 (no lateral coupling), a velocity step v0 at x = 0.  Behind the front
     # u(x, t) = v0 (t - x / c), so two probes give c = v0 (x2 - x1) / (u1 - u2) exactly in the continuum;
     # measured before the reflection from x = L returns to x2 = L/2 (t < 1.5 L / c).
     E, rho, L, v0 = 2e11, 7800.0, 1.0, 1e-3
     c = np.sqrt(E / rho)
-    errors = []
     for nx in (40, 80):
         solid = box_solid((0, 0, 0), (L, 0.05, 0.05), (nx, 1, 1), material(E=E, nu=0.0, rho=rho),
                           prescribed=[{"group": "xmin", "velocity": [v0, None, None]}])
@@ -23,10 +34,17 @@ def test_longitudinal_wave_travels_at_bar_speed():
         x = solid.reference_positions[:, 0]
         u = solid.displacements[:, 0]
         u1, u2 = u[np.isclose(x, 0.25 * L)].mean(), u[np.isclose(x, 0.5 * L)].mean()
-        errors.append(abs(v0 * 0.25 * L / (u1 - u2) / c - 1.0))
-    # dispersion of the discrete front is O(h^2): measured 0.25 % and 0.06 %
-    assert errors[1] < errors[0]
-    assert errors[1] < 0.01
+        error = abs(v0 * 0.25 * L / (u1 - u2) / c - 1.0)
+        # The incident front is at 1.4 L (reflected: 0.6 L, which the probes at 0.25 L, 0.5 L lie ahead of, where
+        # the Airy profile decays exponentially): the probes are 1.15 L and 0.9 L behind it.
+        envelope = front_tail_envelope(L / nx, c * end / steps / (L / nx), c * end, (1.15 * L, 0.9 * L), 0.25 * L)
+        print(f"nx = {nx}: wave speed error {error:.3g}, dispersion-tail envelope {envelope:.3g}")
+        # The error is the tail's oscillation at the probes: its sign and size depend on the phase there, so it
+        # is not monotone in h (measured 2.7e-4 at nx = 40, 2.4e-4 at 80, 1.1e-4 at 160), within the envelope
+        # (3.5e-3, 1.1e-3, 3.6e-4: it falls as h^(3/2)).  The envelope is asymptotic in s: at nx = 20 (s ~ 12)
+        # the measured 1.3e-2 exceeds its 1.2e-2, hence nx >= 40.  A stiffness or mass wrong by 0.4 % shifts c
+        # itself by 2e-3 and fails nx = 80.
+        assert error <= envelope
 
 
 @pytest.fixture(scope="module")
@@ -96,10 +114,13 @@ def test_first_bending_frequency_matches_static_stiffness_estimate(released_cant
 def test_undamped_free_vibration_conserves_energy_over_ten_thousand_steps(released_cantilever):
     run = released_cantilever
     modified, midpoint, kinetic = run["energies"].T
-    # H is conserved exactly by the scheme: only round-off accumulates (10^4 steps x ~1e-15)
-    assert np.abs(modified - modified[0]).max() <= 1e-10 * modified[0]
-    # it equals the released strain energy (the first step starts from rest)
-    assert modified[0] == pytest.approx(run["initial_strain_energy"], rel=1e-10)
+    # H is conserved exactly by the scheme: only round-off accumulates, a few eps (~1e-15) per step over
+    # 10^4 steps in the worst (linear) case, 1e-11, plus ~1e-12 for evaluating H (sums over ~700 dofs; see
+    # below): 2e-11 (measured 6.4e-12).
+    assert np.abs(modified - modified[0]).max() <= 2e-11 * modified[0]
+    # it equals the released strain energy (the first step starts from rest), to the round-off of the two
+    # evaluations (measured 1.1e-12)
+    assert modified[0] == pytest.approx(run["initial_strain_energy"], rel=1e-11)
     # physical energy: 0 <= E_mid - H = dt^2/8 v^T K v <= (omega_max dt)^2 / 4 * KE   (proven bound)
     omega_max_dt = run["solid"].largest_frequency_bound() * run["dt"]
     gap = midpoint - modified
@@ -192,15 +213,19 @@ def test_nodal_forces_deliver_their_impulse_and_work():
     mass = solid.lumped_mass.getArray().reshape(-1, 3)
     momentum = (mass * solid.velocities).sum(axis=0)
     impulse = (forces.sum(axis=0) + [0.5, 0.0, 0.0]) * dt
-    assert np.allclose(momentum, impulse, rtol=1e-12, atol=0)  # round-off of a sum of ~30 terms
+    # Round-off: sums of ~30 nodal terms (forces, mass x velocity), <= 30 eps each way: 100 eps
+    # (measured 1.1e-16 = 0.5 eps).
+    round_off = 100 * np.finfo(float).eps
+    assert np.allclose(momentum, impulse, rtol=round_off, atol=0)
     # work of the step: F . (u1 - u0) / 2 (midpoint rule with v_{-1/2} = 0)
     moved = solid.displacements
     expected_work = 0.5 * (np.sum(forces * moved[nodes]) + 0.5 * moved[nodes[0], 0])
-    assert solid.external_work == pytest.approx(expected_work, rel=1e-12)
+    assert solid.external_work == pytest.approx(expected_work, rel=round_off)
     solid.step(dt)  # the forces were cleared after the step
-    assert np.allclose((mass * solid.velocities).sum(axis=0), impulse, rtol=1e-12, atol=0)
+    assert np.allclose((mass * solid.velocities).sum(axis=0), impulse, rtol=round_off, atol=0)
     # sub-cycled: the same forces act over the whole interval
     solid.add_nodal_forces(nodes, forces)
     substeps = solid.advance(2.5 * dt)
     assert substeps == 3
-    assert np.allclose((mass * solid.velocities).sum(axis=0), impulse + forces.sum(axis=0) * 2.5 * dt, rtol=1e-12, atol=0)
+    assert np.allclose((mass * solid.velocities).sum(axis=0), impulse + forces.sum(axis=0) * 2.5 * dt, rtol=round_off,
+                       atol=0)

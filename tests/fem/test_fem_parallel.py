@@ -53,8 +53,9 @@ def test_one_two_three_ranks_agree(runs, element):
         # 100 explicit steps propagate the static difference through a stable (non-growing) scheme; the
         # nodal forces come from rank 0 only and reach their owners through PETSc's assembly
         assert difference("dynamic_u") <= static_tolerance * 10
-        # from rest, without a linear solve: summation order only (100 steps x ~1e-15)
-        assert difference("rest_u") <= 1e-12
+        # from rest, without a linear solve: summation order only, ~1e-15 per step over 100 steps (measured
+        # 1.8e-15 .. 2.8e-15)
+        assert difference("rest_u") <= 100 * 1e-15
         # energies and work involve velocities, differences of displacements over one step (x ~1e3)
         for key in ("kinetic", "work"):
             assert abs(float(other[key]) - float(reference[key])) <= static_tolerance * 1e3 * abs(float(reference[key]))

@@ -37,6 +37,14 @@ GLASS = {"density": 2500.0, "youngs_modulus": 1.0e7, "poisson_ratio": 0.3}
 SOFT = {"density": 2500.0, "youngs_modulus": 1.0e6, "poisson_ratio": 0.3}
 RADIUS = 1.0e-3
 
+
+def rayleigh_step(material: dict, radius: float) -> float:
+    """0.2 Rayleigh times of the sphere, explicit: these cases test decomposition and agreement across
+    rank counts over fixed step counts, not the restitution, so they keep the step dt auto had before
+    it resolved contacts (docs/stability.md)."""
+    shear = material["youngs_modulus"] / (2.0 * (1.0 + material["poisson_ratio"]))
+    return 0.2 * np.pi * radius * np.sqrt(material["density"] / shear) / (0.1631 * material["poisson_ratio"] + 0.8766)
+
 GAS_STEPS = 200
 GAS_SITES = (6, 6, 8)      # 288 particles
 GAS_SPACING = 2.3e-3
@@ -70,7 +78,7 @@ def gas_scene(periodic: bool) -> dict:
     velocities = rng.normal(0.0, 0.7, size=(count, 3))
     walls = [_plane("floor", (0, 0, 0), (0, 0, 1)), _plane("lid", (0, 0, size[2]), (0, 0, -1))]
     scene = {
-        "time": {"end": 1.0, "dt": "auto", "dt_factor": 0.2},
+        "time": {"end": 1.0, "dt": rayleigh_step(GLASS, 0.9e-3)},
         "gravity": [0.0, 0.0, -9.81],
         "materials": {"glass": dict(GLASS)},
         "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.6, "friction": 0.4}},
@@ -102,7 +110,7 @@ def shear_scene() -> dict:
     velocities = rng.normal(0.0, 0.2, size=(count, 3))
     velocities[:, 0] += 3.0 + 1.0 * (2.0 * positions[:, 2] / size[2] - 1.0)
     return {
-        "time": {"end": 1.0, "dt": "auto", "dt_factor": 0.2},
+        "time": {"end": 1.0, "dt": rayleigh_step(SOFT, RADIUS)},
         "gravity": [0.0, 0.0, 0.0],
         "materials": {"soft": dict(SOFT)},
         "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.8, "friction": 0.3}},
@@ -138,7 +146,7 @@ def slide_scene() -> dict:
     positions = [a, b] + spectators
     velocities = [[-0.4, 0, 0], [-0.4, 0, 0]] + [[0, 0, 0]] * len(spectators)
     return {
-        "time": {"end": 1.0, "dt": "auto", "dt_factor": 0.2},
+        "time": {"end": 1.0, "dt": rayleigh_step(GLASS, r)},
         "gravity": list(SLIDE_GRAVITY),
         "materials": {"glass": dict(GLASS)},
         "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.5, "friction": SLIDE_FRICTION}},
@@ -160,7 +168,7 @@ def pile_scene(threshold: float) -> dict:
     rng = np.random.default_rng(2)
     positions = _lattice(PILE_SITES, 3.0e-3, rng, 0.3e-3)
     return {
-        "time": {"end": 1.0, "dt": "auto", "dt_factor": 0.2},
+        "time": {"end": 1.0, "dt": rayleigh_step(SOFT, RADIUS)},
         "gravity": [-150.0, -150.0, -150.0],
         "materials": {"soft": dict(SOFT)},
         "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.2, "friction": 0.5}},
@@ -187,7 +195,7 @@ def lost_scene(output_dir: str) -> dict:
     positions = resting + escaping
     velocities = [[0, 0, 0]] * LOST_RESTING + [[1.0, 0, 0]] * LOST_ESCAPING
     return {
-        "time": {"end": 0.015, "dt": "auto", "dt_factor": 0.2},
+        "time": {"end": 0.015, "dt": rayleigh_step(GLASS, r)},
         "gravity": [0.0, 0.0, -9.81],
         "materials": {"glass": dict(GLASS)},
         "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.3}},
@@ -382,23 +390,41 @@ def run_pile(comm, out, threshold=1.2):
 
 
 def run_lost(comm, out):
+    """Escaping particles are removed and counted during a run.  A NaN particle (as after a numerical
+    blow-up) stops the run (pdemfem.monitor: exit 3 on every rank); stepping on without the monitor,
+    the next rebuild removes and counts it."""
+    from pdemfem.errors import SolverError
+
     output_dir = str(Path(out) / f"lost_{comm.size}")
     sim = Simulation.from_dict(lost_scene(output_dir), comm=comm, output_dir=output_dir)
     total = sim.particle_count()
-    # One resting particle (id 0) goes NaN (as after a numerical blow-up).
-    state = sim.particle_system.state
-    state.velocities[np.flatnonzero(state.ids[:state.owned_count] == 0)] = np.nan
     sim.run(progress=False)
     positions = by_id(comm, sim, "positions")
     velocities = by_id(comm, sim, "velocities")
     ids = gathered(comm, sim.particles.ids)
     energies = sim.energies()
     count = sim.particle_count()
+
+    blown_dir = str(Path(out) / f"lost_nan_{comm.size}")
+    blown = Simulation.from_dict(lost_scene(blown_dir), comm=comm, output_dir=blown_dir)
+    state = blown.particle_system.state
+    state.velocities[np.flatnonzero(state.ids[:state.owned_count] == 0)] = np.nan
+    try:
+        blown.run(progress=False)
+        stopped = ""
+    except SolverError as error:
+        stopped = str(error)
+    blown.step(1)  # the drift makes the position NaN, the rebuild it forces removes the particle
+    blown_ids = gathered(comm, blown.particles.ids)
+    blown_positions = by_id(comm, blown, "positions")
     if comm.rank == 0:
         return dict(total=total, count=count, lost=sim.particle_system.lost_particles,
                     ids=np.sort(ids), finite=bool(np.all(np.isfinite(positions)) and np.all(np.isfinite(velocities))),
                     kinetic=energies["kinetic_energy"], history=str(Path(output_dir) / "history.csv"),
-                    escaping=LOST_ESCAPING)
+                    escaping=LOST_ESCAPING, stopped=np.array(stopped), blown_ids=np.sort(blown_ids),
+                    blown_lost=blown.particle_system.lost_particles,
+                    blown_nonfinite=blown.particle_system.nonfinite_particles,
+                    blown_finite=bool(np.all(np.isfinite(blown_positions))))
 
 
 def _abort_on_error(kind, value, traceback):

@@ -21,7 +21,8 @@ out, steps, checkpoint_steps, result = sys.argv[1], int(sys.argv[2]), int(sys.ar
 restart = sys.argv[sys.argv.index("--restart") + 1] if "--restart" in sys.argv else None
 element = sys.argv[sys.argv.index("--element") + 1] if "--element" in sys.argv else "P1"
 scene = restart_scenes.pile_scene(out, steps, checkpoint_steps, checkpoint_steps, element=element)
-simulation = Simulation.from_dict(scene, comm=comm, base_dir=out, restart=restart)
+with restart_scenes.cross_rank_static_solve():  # compared with other rank counts to round-off
+    simulation = Simulation.from_dict(scene, comm=comm, base_dir=out, restart=restart)
 simulation.run(progress=False)
 state = restart_scenes.gather_state(simulation)
 if comm.rank == 0:

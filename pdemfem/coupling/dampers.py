@@ -1,0 +1,160 @@
+"""Contact dashpots on a deformable surface: applied by the solid at its own rate, balanced on the particle.
+
+Why.  A contact's force is computed once per DEM step.  Held constant over the solid's
+FE sub-steps, its elastic part is harmless, but its dashpot part -C (u_p - s) feeds the
+surface velocity s of the *last* interval back to the surface nodes as a force over the
+*next* one.  For the surface's high modes (omega h > pi/2, h the interval) that delayed
+damping is negative damping: a heavy particle resting on a finely meshed, stiff solid
+pumps energy into the solid until it rings and lifts the particle.  Removing the surface
+velocity from the contact's relative velocity stops the growth (measured: largest nodal
+speed 3e-3 m/s flat over 1 s instead of growing to 0.44 m/s), which locates the cause.
+
+What.  Per contact record the dashpot tensor C = c_n n n^T + c_t (I - n n^T) (c_n = 0 when
+the normal force was clamped, c_t = 0 when sliding), the particle's contact-point
+velocity u_p and the surface velocity s_prev the DEM step used.  The solid receives
+
+* the contact force without its dashpot part, held over the interval as before, and
+* per surface node k of the contact's triangle (barycentric weight w_k >= 0) a dashpot
+  w_k C (u_p - v_k) on the node's *own current* velocity, integrated implicitly at every
+  FE sub-step (backward Euler: dissipative for any step; kernels.apply_contact_dampers).
+
+Momentum.  Over an interval h the dashpots give the solid the impulse
+dt C (u_p - v̄_cur) per contact record (v̄_cur = the contact point's mean velocity over the
+interval, sum_k w_k Δx_k / h; dt = the DEM step of the record), the particle got
+dt C (u_p - s_prev) in its step; after the advance the particle receives the difference
+dt C (v̄_cur - s_prev) (and its moment about the centre), so particles + solid conserve
+linear and angular momentum to round-off, as without the dashpots.
+
+Energy.  The dissipated energy the contact kernel booked with s_prev is corrected to the
+work the dashpots actually did: on the particle dt F_d · u_p with F_d = -C (u_p - v̄_cur),
+on the solid the kernel's 1/2 m (v^2 - v*^2) per damped node (Solid.damper_work_local).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from pdemfem.walls.triangle_contact import DAMPING_RECORD_COLUMNS
+
+# A record: particle index, particle id, triangle, weights (3), then the kernel's dashpot record
+# (c_n, c_t, normal (3), lever, particle contact-point velocity (3), surface velocity (3)).
+RECORD_INDEX, RECORD_ID, RECORD_TRIANGLE, RECORD_WEIGHTS = 0, 1, 2, 3
+RECORD_DAMPING = 6
+RECORD_COLUMNS = RECORD_DAMPING + DAMPING_RECORD_COLUMNS
+
+
+def make_records(particles, ids, triangles, weights, damping) -> np.ndarray:
+    """Pack one step's contacts (only those with a dashpot) into (n, RECORD_COLUMNS) float rows."""
+    active = (damping[:, 0] != 0.0) | (damping[:, 1] != 0.0)
+    if not np.any(active):
+        return np.zeros((0, RECORD_COLUMNS))
+    rows = np.empty((int(active.sum()), RECORD_COLUMNS))
+    rows[:, RECORD_INDEX] = particles[active]
+    rows[:, RECORD_ID] = ids[active]
+    rows[:, RECORD_TRIANGLE] = triangles[active]
+    rows[:, RECORD_WEIGHTS:RECORD_WEIGHTS + 3] = weights[active]
+    rows[:, RECORD_DAMPING:] = damping[active]
+    return rows
+
+
+@njit(inline="always", cache=True)
+def _dashpot_times(record, x, y, z):
+    """C (x, y, z) for the record's dashpot C = c_n n n^T + c_t (I - n n^T)."""
+    normal_coefficient = record[RECORD_DAMPING]
+    tangential_coefficient = record[RECORD_DAMPING + 1]
+    nx = record[RECORD_DAMPING + 2]
+    ny = record[RECORD_DAMPING + 3]
+    nz = record[RECORD_DAMPING + 4]
+    along = (normal_coefficient - tangential_coefficient) * (nx * x + ny * y + nz * z)
+    return (tangential_coefficient * x + along * nx, tangential_coefficient * y + along * ny,
+            tangential_coefficient * z + along * nz)
+
+
+@njit(cache=True)
+def node_dampers(records, triangles, scale, tensors, targets, previous_forces):
+    """Spread the records' dashpots onto the triangles' vertices (scaled by `scale`).
+
+    tensors[v] += scale w C (xx, yy, zz, yz, xz, xy), targets[v] += scale w C u_p and
+    previous_forces[v] += scale w C (u_p - s_prev): the dashpot part of the counter-force the
+    DEM step already spread, which the solid now gets from the nodal dashpots instead."""
+    for r in range(records.shape[0]):
+        record = records[r]
+        t = int(record[RECORD_TRIANGLE])
+        cn = record[RECORD_DAMPING]
+        ct = record[RECORD_DAMPING + 1]
+        nx = record[RECORD_DAMPING + 2]
+        ny = record[RECORD_DAMPING + 3]
+        nz = record[RECORD_DAMPING + 4]
+        ux = record[RECORD_DAMPING + 6]
+        uy = record[RECORD_DAMPING + 7]
+        uz = record[RECORD_DAMPING + 8]
+        gx, gy, gz = _dashpot_times(record, ux, uy, uz)
+        px, py, pz = _dashpot_times(record, ux - record[RECORD_DAMPING + 9], uy - record[RECORD_DAMPING + 10],
+                                    uz - record[RECORD_DAMPING + 11])
+        difference = cn - ct
+        for k in range(3):
+            vertex = triangles[t, k]
+            w = scale * record[RECORD_WEIGHTS + k]
+            tensors[vertex, 0] += w * (ct + difference * nx * nx)
+            tensors[vertex, 1] += w * (ct + difference * ny * ny)
+            tensors[vertex, 2] += w * (ct + difference * nz * nz)
+            tensors[vertex, 3] += w * difference * ny * nz
+            tensors[vertex, 4] += w * difference * nx * nz
+            tensors[vertex, 5] += w * difference * nx * ny
+            targets[vertex, 0] += w * gx
+            targets[vertex, 1] += w * gy
+            targets[vertex, 2] += w * gz
+            previous_forces[vertex, 0] += w * px
+            previous_forces[vertex, 1] += w * py
+            previous_forces[vertex, 2] += w * pz
+
+
+@njit(cache=True)
+def balance_particles(records, local_index, triangles, vertex_velocities, dt, velocities, angular_velocities, mass,
+                      inverse_inertia):
+    """Give each record's particle (local_index[r] >= 0) the impulse dt C (v̄_cur - s_prev) at its contact
+    point; vertex_velocities are the mean velocities over the advance just done.
+    Returns the correction of the booked dissipation, sum dt [u_p·C(u_p - v̄_cur) - r·C r], r = u_p - s_prev."""
+    dissipation = 0.0
+    for r in range(records.shape[0]):
+        i = local_index[r]
+        if i < 0:
+            continue
+        record = records[r]
+        t = int(record[RECORD_TRIANGLE])
+        cx = 0.0
+        cy = 0.0
+        cz = 0.0
+        for k in range(3):
+            vertex = triangles[t, k]
+            w = record[RECORD_WEIGHTS + k]
+            cx += w * vertex_velocities[vertex, 0]
+            cy += w * vertex_velocities[vertex, 1]
+            cz += w * vertex_velocities[vertex, 2]
+        ux = record[RECORD_DAMPING + 6]
+        uy = record[RECORD_DAMPING + 7]
+        uz = record[RECORD_DAMPING + 8]
+        sx = record[RECORD_DAMPING + 9]
+        sy = record[RECORD_DAMPING + 10]
+        sz = record[RECORD_DAMPING + 11]
+        jx, jy, jz = _dashpot_times(record, cx - sx, cy - sy, cz - sz)
+        jx *= dt
+        jy *= dt
+        jz *= dt
+        inverse_mass = 1.0 / mass[i]
+        velocities[i, 0] += jx * inverse_mass
+        velocities[i, 1] += jy * inverse_mass
+        velocities[i, 2] += jz * inverse_mass
+        # Moment about the centre of the impulse at the contact point, lever * n below the centre.
+        lever = record[RECORD_DAMPING + 5]
+        nx = record[RECORD_DAMPING + 2]
+        ny = record[RECORD_DAMPING + 3]
+        nz = record[RECORD_DAMPING + 4]
+        angular_velocities[i, 0] += -lever * (ny * jz - nz * jy) * inverse_inertia[i]
+        angular_velocities[i, 1] += -lever * (nz * jx - nx * jz) * inverse_inertia[i]
+        angular_velocities[i, 2] += -lever * (nx * jy - ny * jx) * inverse_inertia[i]
+        fx, fy, fz = _dashpot_times(record, ux - cx, uy - cy, uz - cz)
+        rx, ry, rz = _dashpot_times(record, ux - sx, uy - sy, uz - sz)
+        dissipation += dt * (ux * fx + uy * fy + uz * fz
+                             - ((ux - sx) * rx + (uy - sy) * ry + (uz - sz) * rz))
+    return dissipation

@@ -1,0 +1,216 @@
+"""Run-time guard: stop a diverging run, with a diagnosis, before it writes garbage to the end.
+
+`pdemfem run` calls `DivergenceMonitor.check()` before the first step, at every output step
+and at every stop check (at most every STOP_CHECK_EVERY steps), on all ranks together.  It
+reads quantities reduced over the ranks (the energies of a history row and the largest speed,
+from one pass; the lost-particle counts), so every rank takes the same decision.  Each test is a
+statement of physics (docs/stability.md lists them):
+
+1. Non-finite: an energy that is inf/NaN, or a particle removed because its position
+   became inf/NaN.
+2. Tunnelling: mesh walls and the solids' contact surfaces have no thickness; a particle
+   moving more than TUNNEL_TRAVEL of the smallest radius per step relative to them can
+   cross one before a contact force builds up, and one whose impact would overlap more than
+   its radius passes whatever the step.
+3. Runaway: a particle moving more than the smallest radius in one step misses its contacts
+   (`Simulation.step` stops at once on the displacement the step computes anyway).
+4. Energy created: the bookkeeping total (kinetic + rotational + potential + elastic +
+   dissipated - wall work + the solids' kinetic, strain and load potential) is conserved
+   by the equations; a stable explicit step errs by a fraction of the energy that moves.
+   The run stops when the total has grown by more than all the energy the scene has had
+   available since the baseline: its kinetic, rotational, elastic and solid energies at
+   the baseline, the largest drop of its potentials seen since, and the work moving walls
+   did.  An integration that creates more energy than the scene ever had is diverging.
+
+Scenes whose bookkeeping cannot be closed skip test 4 (logged once): solids with a
+prescribed velocity or displacement (their work is not tracked), and gravity along a
+periodic axis (a wrapped particle's potential jumps by m g L).
+"""
+from __future__ import annotations
+
+import logging
+import math
+
+from pdemfem.errors import SolverError
+from pdemfem.scene import derived
+
+log = logging.getLogger("pdemfem")
+
+# The bookkeeping total is a sum of O(particles) terms accumulated over up to ~1e7 steps: its
+# round-off is below ~1e7 * 2.2e-16 = 2e-9 of the magnitudes summed; 1e-8 is above that.
+ROUND_OFF = 1e-8
+
+_POTENTIALS = ("potential_energy", "solid_load_potential")
+_STORED = ("kinetic_energy", "rotational_energy", "elastic_energy", "solid_kinetic_energy", "solid_strain_energy")
+
+
+def total_energy(energies: dict) -> float:
+    """The bookkeeping total of Simulation.total_energy, from an energies() dict."""
+    return (energies["kinetic_energy"] + energies["rotational_energy"] + energies["potential_energy"]
+            + energies["elastic_energy"] + energies["dissipated_energy"] - energies["wall_work"]
+            + energies.get("solid_kinetic_energy", 0.0) + energies.get("solid_strain_energy", 0.0)
+            + energies.get("solid_load_potential", 0.0))
+
+
+class DivergenceMonitor:
+    """Collective checks of a running Simulation; `check()` raises SolverError (exit 3) on divergence."""
+
+    def __init__(self, simulation):
+        self.sim = simulation
+        scene = simulation.scene
+        self.thin_surfaces = ([wall.name for wall in scene.walls if wall.kind == "mesh"]
+                              + [solid.name for solid in scene.solids if solid.contact])
+        radii = simulation.particle_system.state.radii[:simulation.particle_system.state.owned_count]
+        local = float(radii.min()) if len(radii) else math.inf
+        self.smallest_radius = simulation.comm.allreduce(local, op=_min_op())
+        self.wall_speed = max((derived._wall_speed(wall) for wall in scene.walls), default=0.0)
+        self.energy_check_skipped = self._energy_check_skipped()
+        # A particle that moves more than the smallest radius in one step passes through others
+        # unseen.  `Simulation.step` stops at once when one has moved more than r_min + skin/2 since
+        # the list build: the list is rebuilt whenever a particle passes skin/2, so that much means
+        # more than r_min in the last step alone.  It reads the displacement the step computes anyway
+        # (no cost), and stops a runaway before its coordinates overflow the neighbour search.
+        if math.isfinite(self.smallest_radius):
+            simulation.runaway_displacement = self.smallest_radius + 0.5 * simulation.particle_system.skin
+        self.baseline = None
+        self.checks = 0
+
+    # ------------------------------------------------------------------ setup
+    def _energy_check_skipped(self):
+        """Why the energy test cannot apply to this scene, or None."""
+        scene = self.sim.scene
+        prescribed = [solid.name for solid in scene.solids if solid.prescribed]
+        if prescribed:
+            return f"solids {', '.join(prescribed)} have prescribed motion, whose work is not tracked"
+        for axis in scene.domain.periodic:
+            if scene.gravity["xyz".index(axis)] != 0.0:
+                return f"gravity has a component along the periodic axis {axis}"
+        return None
+
+    def start(self) -> None:
+        """Collective: take the baseline (the state `run` starts from, fresh or restarted) and check it.
+
+        At step 0 the elastic energy is not available energy: insertion places no two particles
+        overlapping, so any overlap energy at the start is a particle placed inside a wall or a
+        solid, which the contact would release as a kick."""
+        self._take_baseline(self.sim.energies(), fresh=self.sim.step_count == 0)
+        if self.energy_check_skipped is not None and self.sim.comm.rank == 0:
+            log.info("run monitor: no energy test (%s); the other tests apply", self.energy_check_skipped)
+        self.check()
+
+    def _take_baseline(self, energies: dict, fresh: bool = False) -> None:
+        system = self.sim.particle_system
+        placed_inside = max(energies["elastic_energy"], 0.0) if fresh else 0.0
+        self.baseline = {
+            "total": total_energy(energies) - placed_inside,
+            "stored": sum(max(energies.get(name, 0.0), 0.0) for name in _STORED) - placed_inside,
+            "potential": sum(energies.get(name, 0.0) for name in _POTENTIALS),
+            "wall_work": energies["wall_work"],
+            "lost": system.lost_particles,
+            "step": self.sim.step_count,
+            "magnitude": sum(abs(value) for value in energies.values()),
+        }
+        self.lowest_potential = self.baseline["potential"]
+
+    # ------------------------------------------------------------------ the check
+    def check(self) -> None:
+        """Collective: raise SolverError naming what diverged and the likely causes."""
+        self.checks += 1
+        sim, system = self.sim, self.sim.particle_system
+        energies = sim.energies()
+        problem = None
+        if not all(math.isfinite(value) for value in energies.values()):
+            bad = [name for name, value in energies.items() if not math.isfinite(value)]
+            problem = f"the simulation diverged: non-finite energies ({', '.join(bad)})"
+        elif system.nonfinite_particles:
+            problem = (f"the simulation diverged: {system.nonfinite_particles} particle(s) reached an infinite or NaN "
+                       f"position and were removed")
+        fastest = system.fastest_speed  # from the energies() pass above
+        travel = (fastest + self.wall_speed) * sim.dt
+        if problem is None and self.thin_surfaces and travel > derived.TUNNEL_TRAVEL * self.smallest_radius:
+            problem = (f"tunnelling: a particle moved at {fastest:.3g} m/s, {travel / self.smallest_radius:.2f} "
+                       f"radii per step relative to the thin surfaces {', '.join(self.thin_surfaces)} (want <= "
+                       f"{derived.TUNNEL_TRAVEL}): it can pass through them (tunnelling)")
+        if problem is None and self.thin_surfaces and math.isfinite(fastest):
+            deepest = max(derived.thin_surface_overlaps(sim.scene, fastest + self.wall_speed), default=None)
+            if deepest is not None and deepest[0] > 1.0:
+                problem = (f"tunnelling: a particle moved at {fastest:.3g} m/s: an impact of {deepest[1]} at that "
+                           f"speed overlaps {deepest[0]:.2g} radii, so it passes through the thin surfaces "
+                           f"{', '.join(self.thin_surfaces)} (tunnelling)")
+        if problem is None and (fastest * sim.dt > self.smallest_radius
+                                or system.largest_displacement > sim.runaway_displacement):
+            problem = (f"{'the simulation diverged: ' if sim.step_count > self.baseline['step'] else ''}"
+                       f"a particle moved at {fastest:.3g} m/s, "
+                       f"{fastest * sim.dt / self.smallest_radius:.3g} radii in one step (more than the smallest "
+                       f"radius: contacts are missed)")
+        if problem is None and self.energy_check_skipped is None:
+            problem = self._energy_problem(energies)
+        if problem is None:
+            return
+        raise SolverError(f"run stopped at step {sim.step_count} (t = {sim.time:.6g} s)",
+                          problem, self.diagnosis(fastest))
+
+    def _energy_problem(self, energies: dict):
+        system = self.sim.particle_system
+        if system.lost_particles != self.baseline["lost"]:
+            # Removed particles take their energy out of the bookkeeping: restart the comparison.
+            self._take_baseline(energies)
+            return None
+        baseline = self.baseline
+        potential = sum(energies.get(name, 0.0) for name in _POTENTIALS)
+        self.lowest_potential = min(self.lowest_potential, potential)
+        available = (baseline["stored"] + (baseline["potential"] - self.lowest_potential)
+                     + abs(energies["wall_work"] - baseline["wall_work"]))
+        created = total_energy(energies) - baseline["total"]
+        floor = ROUND_OFF * max(baseline["magnitude"], sum(abs(value) for value in energies.values()))
+        if created > available + floor:
+            return (f"the simulation diverged: the energy total grew by {created:.3g} J, more than the "
+                    f"{available:.3g} J of kinetic, elastic and potential energy and wall work the scene had "
+                    f"available since step {baseline['step']}")
+        return None
+
+    # ------------------------------------------------------------------ diagnosis
+    def diagnosis(self, fastest: float) -> str:
+        """The likely causes, from the scene and the step, as the error's fix line."""
+        return "likely cause: " + "; ".join(likely_causes(self.sim.scene, self.sim.dt, fastest,
+                                                           self.smallest_radius, self.thin_surfaces))
+
+
+def likely_causes(scene, dt: float, fastest: float, smallest_radius: float, thin_surfaces) -> list:
+    """Plain-language causes of a divergence that the scene and the step show, each with its fix."""
+    causes = []
+    rayleigh = derived.rayleigh_time(scene)
+    if rayleigh is not None and dt > derived.RAYLEIGH_LIMIT * rayleigh:
+        causes.append(f"dt = {dt:.3g} s is {dt / rayleigh:.2f} x the Rayleigh time {rayleigh:.3g} s, above the "
+                      f"elastic wave limit {derived.RAYLEIGH_LIMIT} (use dt: auto)")
+    speed = max(derived.expected_impact_speed(scene), fastest if math.isfinite(fastest) else 0.0)
+    resolvable = 0.0 < speed < math.inf and rayleigh is not None
+    for limit, why in derived.contact_step_limits(scene, speed) if resolvable else []:
+        if dt > limit:
+            if why.startswith("dashpot"):
+                causes.append(f"the restitution is too small for the step: the {why} needs dt <= {limit:.3g} s "
+                              f"at {speed:.3g} m/s (use dt: auto, or raise the restitution)")
+            else:
+                causes.append(f"dt is above the contact limit: {why} needs dt <= {limit:.3g} s (use dt: auto)")
+    if thin_surfaces and math.isfinite(fastest) and fastest * dt > derived.TUNNEL_TRAVEL * smallest_radius:
+        causes.append(f"tunnelling through {', '.join(thin_surfaces)}: at {fastest:.3g} m/s a particle moves "
+                      f"{fastest * dt / smallest_radius:.2f} radii per step (lower dt, or set "
+                      f"time.expected_impact_speed to the real impact speed with dt: auto)")
+    if math.isfinite(fastest):
+        for ratio, label in derived.thin_surface_overlaps(scene, fastest):
+            if ratio > 1.0:
+                causes.append(f"tunnelling: {label} at {fastest:.3g} m/s overlaps {ratio:.2g} radii (the material is "
+                              f"too soft for that speed: raise youngs_modulus or lower the speed)")
+    causes.extend(derived.start_inside_walls(scene))
+    if not math.isfinite(fastest):
+        causes.append("a particle has an infinite or NaN velocity (check the initial velocities)")
+    if not causes:
+        causes.append("none of the known limits is exceeded at the expected impact speed: lower time.dt or "
+                      "time.dt_factor, set time.expected_impact_speed, and check the run with `pdemfem check`")
+    return list(dict.fromkeys(causes))  # one line per cause, however many walls share it
+
+
+def _min_op():
+    from mpi4py import MPI
+
+    return MPI.MIN

@@ -1,0 +1,291 @@
+"""Guards in `pdemfem run`: the run monitor stops diverging runs with exit 3, a final output step,
+a checkpoint when checkpoints are on, and a diagnosis; `run` repeats `check`'s warnings.
+
+Each scene is a small version of a case that used to run to the end with exit 0 and garbage in
+the history (docs/stability_guards.md lists the before/after figures).
+"""
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pdemfem import Simulation, cli
+from pdemfem.errors import SolverError
+from pdemfem.io.checkpoint import checkpoint_path
+from pdemfem.runtime import mpiexec_command, process_environment
+
+SOFT_GLASS = "glass: {density: 2500, youngs_modulus: 5.0e6, poisson_ratio: 0.3}"
+
+# 30 beads above a floor at dt = 1e-3 s, 8 x the Rayleigh time: the contacts explode.
+COARSE_BEADS = f"""\
+time: {{end: 0.02, dt: 1.0e-3}}
+gravity: [0, 0, -9.81]
+materials:
+  {SOFT_GLASS}
+interactions:
+  default: {{model: hertz_mindlin, restitution: 0.5, friction: 0.5}}
+particles:
+  - name: beads
+    material: glass
+    radius: 0.001
+    insert:
+      kind: random
+      region: {{box: [[0, 0, 0], [0.01, 0.01, 0.01]]}}
+      count: 30
+      seed: 1
+walls:
+  - {{name: floor, kind: plane, point: [0, 0, 0], normal: [0, 0, 1], material: glass}}
+output: {{dir: out, every: 0.002}}
+"""
+
+# One sphere whose centre starts 0.5 mm behind the floor (radius 1 mm).
+BEHIND_PLANE = f"""\
+time: {{end: 0.002, dt: auto}}
+gravity: [0, 0, -9.81]
+materials:
+  {SOFT_GLASS}
+particles:
+  - name: ball
+    material: glass
+    radius: 0.001
+    insert: {{kind: list, positions: [[0, 0, -0.0005]]}}
+walls:
+  - {{name: floor, kind: plane, point: [0, 0, 0], normal: [0, 0, 1], material: glass}}
+output: {{dir: out, every: 0.0005}}
+"""
+
+# One particle at 1e200 m/s: its kinetic energy overflows.
+OVERFLOW = f"""\
+time: {{end: 0.001, dt: DT}}
+gravity: [0, 0, 0]
+materials:
+  {SOFT_GLASS}
+particles:
+  - name: ball
+    material: glass
+    radius: 0.001
+    insert: {{kind: list, positions: [[0, 0, 0.01]], velocities: [[0, 0, 1.0e200]]}}
+walls:
+  - {{name: floor, kind: plane, point: [0, 0, 0], normal: [0, 0, 1], material: glass}}
+output: {{dir: out, every: 0.0001}}
+"""
+
+# Two spheres closing at 5 m/s with e = 1e-4: the calibrated dashpot (gamma = 91) needs
+# omega dt < 2 / gamma, far below the old default dt (0.2 Rayleigh times).
+STICKY_PAIR = f"""\
+time: {{end: 0.0005, dt: DT}}
+gravity: [0, 0, 0]
+materials:
+  {SOFT_GLASS}
+interactions:
+  default: {{model: MODEL, restitution: 1.0e-4, friction: 0.5}}
+particles:
+  - name: pair
+    material: glass
+    radius: 0.001
+    insert:
+      kind: list
+      positions: [[0, 0, 0], [0.0021, 0, 0]]
+      velocities: [[2.5, 0, 0], [-2.5, 0, 0]]
+output: {{dir: out, every: 0.0001}}
+CHECKPOINT"""
+
+OLD_DEFAULT_DT = "2.45e-5"  # 0.2 x the Rayleigh time of the 1 mm soft glass sphere (the old dt: auto)
+
+
+@pytest.fixture
+def workdir(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def run_cli(capsys, folder: Path, text: str):
+    path = folder / "scene.yaml"
+    path.write_text(text)
+    code = cli.main(["run", str(path), "--quiet", "-o", str(folder / "out")])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def history(folder: Path) -> list:
+    with open(folder / "out" / "history.csv") as handle:
+        return list(csv.DictReader(handle))
+
+
+def test_coarse_step_stops_with_exit_3_and_names_the_limits(capsys, workdir):
+    code, _, err = run_cli(capsys, workdir, COARSE_BEADS)
+    assert code == 3, err
+    assert err.count("error: ") == 1 and "Traceback" not in err
+    assert "the simulation diverged: " in err
+    assert "above the elastic wave limit" in err and "steps per particle-particle contact" in err
+    # run repeated check's warnings first
+    assert "warning: time.dt = 0.001 s is 8.17 x the Rayleigh time" in err
+    rows = history(workdir)
+    # The stop wrote its output step: the last row is the step the monitor stopped at, before the end.
+    assert 0 < int(rows[-1]["step"]) < 20
+    # Before the guard the run reached t = 0.02 s with ~1e8 J in the 30 beads (4e-6 J available).
+    assert float(rows[-1]["kinetic_energy"]) < 1.0
+
+
+def test_sphere_started_behind_a_plane_stops_at_step_0(capsys, workdir):
+    code, _, err = run_cli(capsys, workdir, BEHIND_PLANE)
+    assert code == 3, err
+    assert "run stopped at step 0" in err
+    assert "starts partly behind or inside wall 'floor'" in err
+    assert len(history(workdir)) == 1  # step 0 only; before the guard the sphere was shot out
+
+
+def test_overflowing_velocity_stops_with_explicit_dt_and_is_refused_with_dt_auto(capsys, workdir):
+    code, _, err = run_cli(capsys, workdir, OVERFLOW.replace("DT", "2.0e-5"))
+    assert code == 3, err
+    # check warns instead of dividing by the zero contact duration (it raised ZeroDivisionError)
+    code = cli.main(["check", str(workdir / "scene.yaml")])
+    out, check_err = capsys.readouterr()
+    assert code == 0 and "the impact speed is inf m/s" in out, (out, check_err)
+    assert "non-finite energies (kinetic_energy)" in err
+    assert "infinite or NaN velocity" in err
+    # dt auto cannot resolve contacts at an infinite impact speed: a scene error (exit 2), no output.
+    (workdir / "out").rename(workdir / "first")
+    code, _, err = run_cli(capsys, workdir, OVERFLOW.replace("DT", "auto"))
+    assert code == 2, err
+    assert "time.dt" in err and "initial velocities" in err
+    assert not (workdir / "out").exists()
+
+
+@pytest.mark.parametrize("model", ["hertz_mindlin", "linear_spring_dashpot"])
+def test_tiny_restitution_blows_up_at_the_old_default_and_is_stable_with_dt_auto(capsys, workdir, model):
+    scene = STICKY_PAIR.replace("MODEL", model)
+    with_checkpoints = scene.replace("DT", OLD_DEFAULT_DT).replace("CHECKPOINT", "checkpoint: {every: 0.0001}\n")
+    code, _, err = run_cli(capsys, workdir, with_checkpoints)
+    assert code == 3, err
+    assert "the restitution is too small for the step" in err
+    rows = history(workdir)
+    stopped = int(rows[-1]["step"])
+    # Checkpoints were on (every 1e-4 s = 4 steps): the stop wrote one of its own step, between two.
+    assert stopped % 4 != 0, stopped
+    assert checkpoint_path(workdir / "out" / "checkpoints", stopped).exists()
+    (workdir / "out").rename(workdir / "coarse")
+    code, _, err = run_cli(capsys, workdir, scene.replace("DT", "auto").replace("CHECKPOINT", ""))
+    assert code == 0, err
+    rows = history(workdir)
+    initial = float(rows[0]["kinetic_energy"])
+    # A nearly plastic contact: at most e^2 = 1e-8 of the kinetic energy comes back; the step error
+    # adds ~1 % of e (docs/stability_guards.md), so anything above 1e-6 of it would be the dashpot
+    # instability.  Before dt auto resolved the dashpot, ~1000 x the initial energy came out.
+    assert float(rows[-1]["kinetic_energy"]) < 1e-6 * initial
+
+
+def _tunnelling_scene(folder: Path, surface: str, dt: str, youngs_modulus: str, speed: float,
+                      height: float = 0.006) -> str:
+    sheet = ""
+    if surface == "sheet":
+        import meshio
+
+        xs = np.linspace(-0.02, 0.02, 5)
+        points = np.array([[x, y, 0.0] for x in xs for y in xs])
+        triangles = []
+        for i in range(4):
+            for j in range(4):
+                a, b = 5 * i + j, 5 * (i + 1) + j
+                triangles += [[a, b, b + 1], [a, b + 1, a + 1]]
+        meshio.write(str(folder / "sheet.msh"), meshio.Mesh(points, [("triangle", np.array(triangles))]),
+                     file_format="gmsh22", binary=True)
+        sheet = "walls:\n  - {name: sheet, kind: mesh, file: sheet.msh, material: steel}\n"
+    else:
+        sheet = ("solids:\n  - name: plate\n"
+                 "    mesh: {box: [[-0.02, -0.02, 0], [0.02, 0.02, 0.002]], cells: [2, 2, 1]}\n"
+                 "    material: steel\n    fixed: [xmin, xmax]\n    contact: [zmax, zmin]\n")
+    return f"""\
+time: {{end: 3.0e-4, dt: {dt}}}
+gravity: [0, 0, 0]
+materials:
+  ball: {{density: 2500, youngs_modulus: {youngs_modulus}, poisson_ratio: 0.3}}
+  steel: {{density: 7800, youngs_modulus: 2.0e11, poisson_ratio: 0.3}}
+particles:
+  - name: ball
+    material: ball
+    radius: 0.001
+    insert: {{kind: list, positions: [[0, 0, {height}]], velocities: [[0, 0, -{speed}]]}}
+{sheet}output: {{dir: out, every: 5.0e-5}}
+"""
+
+
+@pytest.mark.parametrize("surface", ["sheet", "plate"])
+def test_tunnelling_is_never_silent(capsys, workdir, surface):
+    # 1 mm soft sphere at 100 m/s, dt 0.2 Rayleigh times: 2.45 radii per step.
+    code, _, err = run_cli(capsys, workdir, _tunnelling_scene(workdir, surface, OLD_DEFAULT_DT, "5.0e6", 100))
+    assert code == 3, err
+    assert "tunnelling: a particle moved at 100 m/s, 2.45 radii per step" in err
+    assert "can tunnel through the thin surface" in err  # run repeated check's warning
+    (workdir / "out").rename(workdir / "coarse")
+    # dt auto resolves the contact, but so soft a sphere at 100 m/s overlaps 3.2 radii: it passes
+    # through whatever the step, so that is refused too.
+    code, _, err = run_cli(capsys, workdir, _tunnelling_scene(workdir, surface, "auto", "5.0e6", 100))
+    assert code == 3, err
+    assert "overlaps 3.2 radii" in err
+
+
+@pytest.mark.parametrize("surface", ["sheet", "plate"])
+def test_stiff_sphere_bounces_off_with_dt_auto(workdir, surface):
+    """The positive case of the tunnelling guard: a stiff sphere at 10 m/s rebounds upwards, on the
+    surface's side (plate top at z = 2 mm, sheet at 0)."""
+    # Starts 0.5 mm above touching: contact after 5e-5 s, rebound long before the end (3e-4 s).
+    height = (0.002 if surface == "plate" else 0.0) + 0.0015
+    text = _tunnelling_scene(workdir, surface, "auto", "2.0e11", 10, height=height)
+    (workdir / "scene.yaml").write_text(text)
+    simulation = Simulation.from_file(workdir / "scene.yaml", output_dir=workdir / "api")
+    simulation.run(progress=False)
+    assert simulation.particles.velocities[0, 2] > 0.0
+    assert simulation.particles.positions[0, 2] > (0.002 if surface == "plate" else 0.0)
+
+
+def test_monitor_is_quiet_on_a_stable_run_and_the_stop_is_a_solver_error(workdir):
+    """Stable runs are untouched (the demo-like beads with dt auto); a diverging one raises
+    SolverError (exit code 3) from Simulation.run, with stopped_by = "divergence"."""
+    stable = Simulation.from_dict(_yaml(COARSE_BEADS.replace("dt: 1.0e-3", "dt: auto")), base_dir=workdir,
+                                  output_dir=workdir / "stable")
+    stable.run(progress=False)
+    assert stable.step_count > 100 and stable.stopped_by is None
+    coarse = Simulation.from_dict(_yaml(COARSE_BEADS), base_dir=workdir, output_dir=workdir / "coarse")
+    with pytest.raises(SolverError) as raised:
+        coarse.run(progress=False)
+    assert raised.value.exit_code == 3 and coarse.stopped_by == "divergence"
+
+
+def test_dissipated_energy_does_not_rise_in_free_flight(workdir):
+    """No contact, no force: the dissipated energy stays exactly where it was (it was 0.03 J
+    per step in the old tunnelling runs only while a contact force acted)."""
+    text = _tunnelling_scene(workdir, "sheet", OLD_DEFAULT_DT, "5.0e6", 10)
+    (workdir / "scene.yaml").write_text(text)
+    simulation = Simulation.from_file(workdir / "scene.yaml", output_dir=workdir / "api")
+    for _ in range(10):
+        before = simulation.particle_system.dissipated_energy
+        simulation.step()
+        if simulation.contact_count() == 0 and not np.any(simulation.particles.forces):
+            assert simulation.particle_system.dissipated_energy == before
+
+
+def _yaml(text: str) -> dict:
+    import yaml
+
+    return yaml.safe_load(text)
+
+
+@pytest.mark.mpi
+def test_divergence_under_mpi_stops_every_rank_with_exit_3_and_one_message(workdir):
+    path = workdir / "scene.yaml"
+    path.write_text(COARSE_BEADS)
+    command = mpiexec_command(2, [sys.executable, "-m", "pdemfem.cli", "run", str(path), "--quiet"])
+    environment = dict(process_environment(), PYTHONFAULTHANDLER="1")  # a crash shows where, not just 139
+    completed = subprocess.run(command, env=environment, cwd=workdir, capture_output=True, text=True, timeout=180)
+    assert completed.returncode == 3, completed.stderr
+    assert completed.stderr.count("error: ") == 1, completed.stderr
+    assert "the simulation diverged" in completed.stderr and "Traceback" not in completed.stderr
+    # The warnings are printed once (rank 0), not once per rank.
+    assert completed.stderr.count("warning: time.dt = 0.001 s") == 1, completed.stderr
