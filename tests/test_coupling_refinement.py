@@ -120,3 +120,19 @@ def test_soft_block_combined_modulus_gives_two_body_hertz_within_its_double_coun
                   f"particle {particle_error:+.3f}; double counting u/delta = {double_counting:.3f}")
             assert abs(error) <= tolerance
             assert abs(particle_error) > abs(error)  # the default is the better choice on these meshes
+
+
+def test_contact_modulus_particle_shortens_the_derived_contact_duration():
+    """dt auto and check take the particle-solid contact duration from the same E* as the tables:
+    t_c ~ E*^(-2/5), so `particle` shortens it by (E*_particle / E*_combined)^(-2/5) (exact formula; round-off)."""
+    from pdemfem.scene import derived
+
+    durations = {}
+    for modulus in ("combined", "particle"):
+        data = ball_on_block(block_modulus=1e7)
+        data["coupling"]["contact_modulus"] = modulus
+        scene, _ = load_scene(data)
+        durations[modulus] = derived.hertz_contact_duration(scene, 2.4).particle_wall
+    block = dict(BLOCK_STEEL, youngs_modulus=1e7)
+    ratio = (normal_compliance(BALL) + normal_compliance(block)) / normal_compliance(BALL)
+    assert durations["particle"] / durations["combined"] == pytest.approx(ratio ** -0.4, rel=1e-12)

@@ -106,9 +106,9 @@ def _mass(material: MaterialConfig, radius: float) -> float:
     return 4.0 / 3.0 * math.pi * radius**3 * material.density
 
 
-def _effective_modulus(a: MaterialConfig, b: MaterialConfig) -> float:
-    """1/E* = (1-nu_a^2)/E_a + (1-nu_b^2)/E_b."""
-    return 1.0 / ((1.0 - a.poisson_ratio**2) / a.youngs_modulus + (1.0 - b.poisson_ratio**2) / b.youngs_modulus)
+def _effective_modulus(a: MaterialConfig, b: Optional[MaterialConfig]) -> float:
+    """1/E* = (1-nu_a^2)/E_a + (1-nu_b^2)/E_b (b None: body a's term only, as the contact tables)."""
+    return 1.0 / sum((1.0 - m.poisson_ratio**2) / m.youngs_modulus for m in (a, b) if m is not None)
 
 
 # --------------------------------------------------------------------------- time step
@@ -473,9 +473,10 @@ def _hertz_duration(m_eff: float, r_eff: float, e_eff: float, speed: float) -> f
     return HERTZ_DURATION_FACTOR * (m_eff**2 / (r_eff * e_eff**2 * speed)) ** 0.2
 
 
-def _effective_shear_modulus(a: MaterialConfig, b: MaterialConfig) -> float:
-    """1/G* = 2 (2 - nu_a)(1 + nu_a)/E_a + 2 (2 - nu_b)(1 + nu_b)/E_b (as the contact tables)."""
-    return 1.0 / sum(2.0 * (2.0 - m.poisson_ratio) * (1.0 + m.poisson_ratio) / m.youngs_modulus for m in (a, b))
+def _effective_shear_modulus(a: MaterialConfig, b: Optional[MaterialConfig]) -> float:
+    """1/G* = 2 (2 - nu_a)(1 + nu_a)/E_a + 2 (2 - nu_b)(1 + nu_b)/E_b (as the contact tables; b None: a's only)."""
+    return 1.0 / sum(2.0 * (2.0 - m.poisson_ratio) * (1.0 + m.poisson_ratio) / m.youngs_modulus
+                     for m in (a, b) if m is not None)
 
 
 def _pairs(scene: Scene, with_shear: bool = False):
@@ -505,6 +506,11 @@ def _pairs(scene: Scene, with_shear: bool = False):
             r_eff = r_a
             if getattr(wall, "kind", "plane") == "cylinder" and not getattr(wall, "inside", True) and wall.radius:
                 r_eff = r_a * wall.radius / (r_a + wall.radius)
+            if any(wall is solid for solid in scene.solids) and scene.coupling.contact_modulus == "particle":
+                # The contact tables leave the solid's compliance out (its FE mesh deforms instead).
+                pair = ("particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, None))
+                yield pair + (_effective_shear_modulus(a, None),) if with_shear else pair
+                continue
             pair = ("particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, w))
             yield pair + (_effective_shear_modulus(a, w),) if with_shear else pair
 
