@@ -136,3 +136,22 @@ def test_contact_modulus_particle_shortens_the_derived_contact_duration():
     block = dict(BLOCK_STEEL, youngs_modulus=1e7)
     ratio = (normal_compliance(BALL) + normal_compliance(block)) / normal_compliance(BALL)
     assert durations["particle"] / durations["combined"] == pytest.approx(ratio ** -0.4, rel=1e-12)
+
+
+def test_soft_block_double_counting_explains_the_elastic_contact_duration(tmp_path):
+    """Without damping (e = 1) the contact is purely elastic and the combined-modulus error is the double
+    counting alone: the FE's indentation u in series with the Hertz approach delta lengthens the pulse by
+    (1 + u / delta)^(3/5) (the static series estimate of the benchmark's discussion).  Measured on 2x2x1 /
+    4x4x2: +5.0 % / +11.6 % against +4.8 % / +10.8 % predicted; the remainder (0.2 / 0.8 points) is the
+    block's own inertia, which the static estimate leaves out: 1.5 points allowed."""
+    ref = study.reference("soft", restitution=1.0)
+    for cells in (2, 4):
+        data = study.scene("soft", "P1", cells, "combined", dt=DT, restitution=1.0)
+        measured = study.against_reference(study.measure_impact(data, str(tmp_path)), ref)
+        predicted = (1 + measured["block_indentation"] / ref["max_overlap"]) ** 0.6
+        ratio = measured["duration"] / ref["duration"]
+        print(f"soft e = 1, {cells} cells: duration ratio {ratio:.4f}, double-counting estimate {predicted:.4f}")
+        assert abs(ratio - predicted) <= 0.015
+        # Elastic contact on an undamped solid: the sphere leaves with its impact speed less what the block
+        # keeps ringing with (measured 0.05-0.1 %).
+        assert measured["rebound"] == pytest.approx(study.SPEED, rel=2e-3)
