@@ -299,10 +299,7 @@ def _command_run(arguments, comm) -> int:
     # The warnings of `pdemfem check`, before the first step (stderr, also with --quiet).
     solid_step = simulation.dt if simulation.solids and not scene.particles else None
     found = derived.warnings(scene, solid_critical_step=solid_step)
-    if simulation.solids:
-        from pdemfem.coupling.check import coupling_warnings
-
-        found += coupling_warnings(scene, simulation.solids, simulation.dt)  # collective
+    found += simulation.coupling_warnings
     if comm.rank == 0:
         for warning in found:
             print(f"warning: {warning}", file=sys.stderr, flush=True)

@@ -172,8 +172,13 @@ class DivergenceMonitor:
     # ------------------------------------------------------------------ diagnosis
     def diagnosis(self, fastest: float) -> str:
         """The likely causes, from the scene and the step, as the error's fix line."""
-        return "likely cause: " + "; ".join(likely_causes(self.sim.scene, self.sim.dt, fastest,
-                                                           self.smallest_radius, self.thin_surfaces))
+        causes = likely_causes(self.sim.scene, self.sim.dt, fastest, self.smallest_radius, self.thin_surfaces)
+        coupled = list(getattr(self.sim, "coupling_warnings", []))
+        if coupled and causes[-1].startswith("none of the known limits"):
+            causes = coupled
+        else:
+            causes += coupled
+        return "likely cause: " + "; ".join(causes)
 
 
 def likely_causes(scene, dt: float, fastest: float, smallest_radius: float, thin_surfaces) -> list:

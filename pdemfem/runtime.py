@@ -9,10 +9,13 @@ so nothing of it is copied around.  Usage from a shell::
 """
 from __future__ import annotations
 
+import functools
 import glob
+import hashlib
 import os
 import shutil
 import sys
+from pathlib import Path
 
 # Debian installs PETSc under /usr/lib/petscdir/petscX.Y/<triplet>-real; the
 # /usr/lib/petsc alternative exists only with petsc-dev, and petsc4py needs PETSC_DIR.
@@ -26,6 +29,27 @@ def find_petsc_dir() -> str | None:
         return configured
     candidates = sorted(glob.glob(_DEBIAN_PETSC_PATTERN))
     return candidates[-1] if candidates else None
+
+
+@functools.lru_cache(maxsize=1)
+def kernel_cache_directory() -> str | None:
+    """Where numba caches the compiled kernels: one folder per version of the package's source.
+
+    numba keys a cached kernel on its own file's time stamp only; a kernel that inlines a function from
+    another module (the contact law into the wall kernels) would keep running the old law after that
+    module changed.  A folder named by a digest of every source file of the package cannot go stale."""
+    digest = hashlib.sha256()
+    package = Path(__file__).resolve().parent
+    for path in sorted(package.rglob("*.py")):
+        digest.update(str(path.relative_to(package)).encode())
+        digest.update(path.read_bytes())
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    directory = os.path.join(base, "pdemfem", "numba", digest.hexdigest()[:16])
+    try:
+        os.makedirs(directory, exist_ok=True)
+    except OSError:
+        return None  # no writable home: numba's own default (__pycache__ beside the sources)
+    return directory
 
 
 def process_environment(base: dict | None = None) -> dict:
@@ -51,6 +75,10 @@ def process_environment(base: dict | None = None) -> dict:
     # One thread per rank: MPI ranks are the parallelism, BLAS threads would compete.
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         environment.setdefault(variable, "1")
+    # A cluster job may point numba elsewhere (jobs/README.md); otherwise a folder per source version.
+    cache = kernel_cache_directory()
+    if cache is not None:
+        environment.setdefault("NUMBA_CACHE_DIR", cache)
     return environment
 
 

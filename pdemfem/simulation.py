@@ -15,6 +15,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem.contact.tables import build_contact_tables
+from pdemfem.coupling.check import coupling_warnings
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
 from pdemfem.errors import SolverError
@@ -57,6 +58,8 @@ class Simulation:
         self.particle_system = self._build_particles()
         for surface in self.coupled_surfaces:
             surface.particle_system = self.particle_system
+        # The coupled-stability warnings of `pdemfem check` (collective): run prints them, the monitor names them.
+        self.coupling_warnings = coupling_warnings(scene, self.solids, self.dt) if self.solids else []
         self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt,
                                        fem_every=scene.coupling.fem_every)
         self.io = SimulationIO(self, force=force)

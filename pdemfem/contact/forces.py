@@ -83,7 +83,11 @@ def contact_response(nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz, effective_mass
     if normal_force < 0.0:
         normal_force = 0.0
         normal_damping = 0.0
-    dissipated = (normal_force - elastic_force) * approach_rate * dt
+    # Velocity Verlet gives the force of this evaluation the mean of the half-step velocities before and
+    # after it; this contact alone changes the approach rate by dt F_n / m* over the step, so the dashpot's
+    # work is booked at approach - dt F_n / (2 m*) (exact for an isolated contact; with the half-step rate
+    # alone, strong damping (e = 1e-4) booked 5-36 % more than the energy lost).
+    dissipated = (normal_force - elastic_force) * (approach_rate - 0.5 * dt * normal_force / effective_mass) * dt
 
     # Tangential: incremental spring xi, rotated into the current tangent plane.
     tx = vx - normal_speed * nx

@@ -45,6 +45,7 @@ class CoupledSurface:
         self.particle_system = None  # set by the simulation: the dashpot balance acts on its particles
         self.dissipation_correction_local = 0.0  # [J], this rank's contacts (dampers.balance_particles)
         self.unbalanced_records = 0  # records whose particle no rank owned any more (lost particles)
+        self.shared_records = 0  # records balanced on another rank than the one that took them
 
     def collect_contact_forces(self, keep_dampers: bool = True) -> None:
         """Add this step's contact counter-forces (this rank's contacts) to the accumulator and keep the
@@ -100,6 +101,7 @@ class CoupledSurface:
         if exchange:
             unmatched = records[local_index < 0]
             shared = _allgather_rows(system.comm, unmatched)
+            self.shared_records += len(shared)
             if len(shared):
                 shared_index = self._local_index(shared, state, by_id_only=True)
                 found = np.array([np.sum(shared_index >= 0)], dtype=np.int64)

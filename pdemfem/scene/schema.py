@@ -19,7 +19,8 @@ class TimeConfig(StrictModel):
     end: PositiveFloat = Field(description="simulated end time [s]")
     dt: Union[PositiveFloat, Literal["auto"]] = Field("auto", description='time step [s] or "auto"')
     dt_factor: Annotated[float, Field(gt=0, le=1)] = Field(
-        0.2, description="dt = dt_factor * Rayleigh time when dt is auto (0.1-0.3 usual)"
+        0.2, description="upper bound of dt auto as a fraction of the Rayleigh time (0.1-0.3 usual); "
+                         "dt auto also resolves every contact (docs/stability.md)"
     )
     expected_impact_speed: Optional[PositiveFloat] = Field(
         None, description="largest impact speed [m/s] for the contact-duration check; estimated when absent"
