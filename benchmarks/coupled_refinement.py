@@ -7,24 +7,27 @@ particle-solid contact modulus is `combined` (E* holds both bodies' compliance) 
 particle's only; the FE mesh supplies the block's deformation).  Two blocks:
 
   stiff  steel, E = 2e10 (2000x the sphere).  Reference: the rigid-plane limit -- the damped Hertz
-         impact of the sphere on an immovable half-space with E* of the pair (the analytic restitution:
-         contact law + gravity integrated as an ODE, `damped_hertz_impact`); the same sphere on a plane
-         wall is run too (it must equal the ODE to the time-integration error).
+         impact of the sphere on an immovable half-space with E* of the pair (the contact law integrated
+         as an ODE, `damped_hertz_impact`; without gravity its rebound is the analytic e v); the same
+         sphere on a plane wall is run too (it must equal the ODE to the time-integration error).
   soft   the sphere's own material (E = 1e7, nu = 0.2; density 1000 so that the block's elastic waves
          cross it ~10x within the contact and the block responds quasi-statically, as a half-space under
          Hertz's assumptions).  Reference: two-body Hertz with damping -- the damped Hertz impact with
          E* = E / (2 (1 - nu^2)) (both bodies' compliance), m* = the sphere's mass (the block is
-         clamped), R* = R, gravity.  The reference quantities are the rebound speed, the contact duration
-         and the peak contact force; the duration and the peak force measure the contact stiffness (they
-         scale as E*^(-2/5) and E*^(2/5)), the rebound the dissipation.
+         clamped), R* = R.  The reference quantities are the contact duration and the peak contact force,
+         which measure the contact's stiffness (they scale as E*^(-2/5) and E*^(2/5)).  The rebound is
+         printed too but is no reference on a deformable block: the contact's dashpot damps only the
+         contact's share of the deformation, the FE's elastic share returns its energy (docs/coupling.md).
 
 Per case only a short window around the impact is simulated: the sphere starts 1 mm above the top and
 the run stops `FREE_STEPS` force-free steps after the pulse (measure_impact / against_reference define the
 rebound, the duration and the filtered peak force compared with the reference).
 
-    python benchmarks/coupled_refinement.py                      # full table (~1-2 min on an idle core)
+    python benchmarks/coupled_refinement.py                      # full table (~2-3 min, 1 rank)
     python benchmarks/coupled_refinement.py --cells 2 4 --elements P1
-    python benchmarks/coupled_refinement.py --plot docs/img/coupled_refinement.png
+    python benchmarks/coupled_refinement.py --plot docs/img/coupled_refinement.png --markdown
+    python benchmarks/coupled_refinement.py --blocks soft --restitution 1.0 \
+        --json benchmarks/results/coupled_refinement_elastic.json   # the elastic (e = 1) table
 
 Prints a table and writes benchmarks/results/coupled_refinement.json.  docs/coupling.md
 ("Contact modulus of a deformable solid") explains the results.
@@ -59,7 +62,8 @@ RESTITUTION = 0.2
 SPEED = 2.4           # impact speed [m/s] (the sphere starts GAP above the top)
 GAP = 1e-3
 TOP = 0.5             # block 1 x 1 x 0.5 m, clamped at z = 0
-DT = 1e-5             # DEM step: rebound and duration converged to < 1 % for every mesh here (2e-5 vs 5e-6)
+DT = 1e-5             # DEM step: 5e-6 changes rebound and duration by < 0.1 % (soft 8x8x4); only the soft block's
+                      # 16x16x8 at e = 0.2 (past the point-load limit, ringing) moves, by 2 % / 7 % (combined / particle)
 FREE_STEPS = 20       # force-free steps that end a pulse (a ringing surface may interrupt it briefly)
 WIDTH_LEVEL = 0.05    # the pulse duration is its width at this fraction of the reference peak force
 PEAK_WINDOW = 0.02    # peak force = the largest mean over this fraction of the reference pulse (filters the
