@@ -114,3 +114,28 @@ def test_point_load_limit_warns_in_check_and_names_the_cause_when_run_diverges(t
     err = capsys.readouterr().err
     assert code == 3, err
     assert "likely cause: solid block: a contact of group b is stiffer than the surface under it" in err
+
+
+def test_check_uses_the_contact_modulus_the_contact_law_uses(tmp_path):
+    """With coupling.contact_modulus particle the contact's E* leaves out the solid's compliance: for a block
+    as soft as the sphere E* rises by (1/E*_combined)/(1/E*_particle) = 1 + (1-nu_s^2)E_p/((1-nu_p^2)E_s), and
+    S_n = 2 E* sqrt(R delta) with the resting delta ~ E*^(-2/3) rises by that ratio^(2/3)."""
+    import re
+
+    import yaml
+
+    from pdemfem.cli import check_report
+
+    compliance = {}
+    for choice in ("combined", "particle"):
+        scene = resting_scene(8)
+        scene["materials"]["steel"]["youngs_modulus"] = 1e7
+        scene["coupling"]["contact_modulus"] = choice
+        path = tmp_path / f"{choice}.yaml"
+        path.write_text(yaml.safe_dump(scene))
+        lines, _ = check_report(str(path))
+        line = next(line for line in lines if line.startswith("solid block: contact vs surface ("))
+        compliance[choice] = float(re.search(r"S_n/\(E l\) = ([0-9.e+-]+)", line).group(1))
+    ratio = 1.0 + (1 - 0.29**2) * 1e7 / ((1 - 0.2**2) * 1e7)
+    # The printed figures carry 3 significant digits: 1e-2 relative.
+    assert compliance["particle"] / compliance["combined"] == pytest.approx(ratio ** (2.0 / 3.0), rel=1e-2)
