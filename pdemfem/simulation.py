@@ -15,10 +15,10 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem.contact.tables import build_contact_tables
-from pdemfem.coupling.check import coupling_warnings
+from pdemfem.coupling.check import coupling_assessment
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
-from pdemfem.errors import SolverError
+from pdemfem.errors import SceneError, SolverError
 from pdemfem.io.simulation_io import SimulationIO
 from pdemfem.monitor import DivergenceMonitor
 from pdemfem.parallel.api_safety import collective_errors, private_communicators
@@ -59,9 +59,10 @@ class Simulation:
         for surface in self.coupled_surfaces:
             surface.particle_system = self.particle_system
         # The coupled-stability warnings of `pdemfem check` (collective): run prints them, the monitor names them.
-        self.coupling_warnings = coupling_warnings(scene, self.solids, self.dt) if self.solids else []
-        self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt,
-                                       fem_every=scene.coupling.fem_every)
+        self.coupling_warnings, interval_limit = (coupling_assessment(scene, self.solids, self.dt) if self.solids
+                                                  else ([], math.inf))
+        self.fem_every = self._allowed_fem_every(interval_limit)
+        self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt, fem_every=self.fem_every)
         self.io = SimulationIO(self, force=force)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
         self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
@@ -69,6 +70,25 @@ class Simulation:
             self.io.restore(restart, force=force)
 
     # ------------------------------------------------------------ construction
+    def _allowed_fem_every(self, interval_limit: float) -> int:
+        """coupling.fem_every, lowered where the held contact force would overshoot a yielding surface's
+        lightest node over the interval (docs/stability.md); a DEM step above that limit is refused."""
+        requested = self.scene.coupling.fem_every
+        if requested * self.dt <= interval_limit:
+            return requested
+        if self.dt > interval_limit:
+            raise SceneError(
+                "time.dt",
+                f"dt = {self.dt:.4g} s holds a contact force on a yielding solid surface longer than its lightest "
+                f"node allows ({interval_limit:.4g} s: S_n dt^2 / (4 m) > 1, see `pdemfem check`)",
+                f"give time.dt <= {interval_limit:.4g} s, or coarsen the solid's contact surface")
+        allowed = max(1, int(math.floor(interval_limit / self.dt)))
+        if self.comm.rank == 0:
+            log.warning("coupling.fem_every lowered from %d to %d: a longer interval than %.4g s lets the held "
+                        "contact force overshoot a yielding surface node (docs/stability.md)",
+                        requested, allowed, interval_limit)
+        return allowed
+
     @classmethod
     def from_file(cls, path, comm=None, output_dir=None, restart=None, force: bool = False):
         """Build from a scene file; `restart`: a checkpoint (or its directory) to continue from,

@@ -139,3 +139,43 @@ def test_check_uses_the_contact_modulus_the_contact_law_uses(tmp_path):
     ratio = 1.0 + (1 - 0.29**2) * 1e7 / ((1 - 0.2**2) * 1e7)
     # The printed figures carry 3 significant digits: 1e-2 relative.
     assert compliance["particle"] / compliance["combined"] == pytest.approx(ratio ** (2.0 / 3.0), rel=1e-2)
+
+
+def test_run_lowers_fem_every_to_the_held_force_limit_and_refuses_a_longer_step(tmp_path, capsys):
+    """Soft block (E = 1e6, 4 cells: S_n/(E l) = 0.63 > 0.1, the surface yields to the contact) under the
+    resting sphere.  fem_every 200 x 2e-4 s holds the contact force over 0.04 s, S_n h^2/(4 m) = 12: the
+    energy grew by 8.8 J in 1 s (measured).  run lowers fem_every to the limit (57) and then neither the
+    mechanical energy rises between samples nor the total (with dissipation) above its start, beyond
+    velocity Verlet's error on the contact (omega dt)^2/4 m g delta.  A DEM step alone above the limit
+    (0.02 s) is refused with exit 2."""
+    import yaml
+
+    from pdemfem import Simulation, cli
+
+    scene = resting_scene(4, fem_every=200, end=1.0)
+    scene["materials"]["steel"]["youngs_modulus"] = 1e6
+    sim = Simulation.from_dict(scene, output_dir=str(tmp_path / "adapted"))
+    assert 1 < sim.fem_every < 200 and sim.coupling.fem_every == sim.fem_every
+
+    def mechanical():
+        energies = sim.energies()
+        return sum(energies[k] for k in ("kinetic_energy", "rotational_energy", "potential_energy", "elastic_energy",
+                                         "solid_kinetic_energy", "solid_strain_energy", "solid_load_potential"))
+
+    bound = ((2.0 * math.pi / contact_period() * sim.dt) ** 2 / 4.0
+             * sphere_mass(BALL_RADIUS, BALL["density"]) * GRAVITY * rest_overlap())
+    start, previous = sim.total_energy(), mechanical()
+    for _ in range(5):
+        sim.step(1000)
+        assert mechanical() <= previous + bound
+        assert sim.total_energy() <= start + bound
+        previous = mechanical()
+
+    scene["time"]["dt"] = 0.02
+    scene["coupling"]["fem_every"] = 1
+    path = tmp_path / "long_step.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    code = cli.main(["run", str(path), "--quiet", "-o", str(tmp_path / "refused")])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "time.dt" in err and "holds a contact force on a yielding solid surface" in err

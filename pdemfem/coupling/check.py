@@ -47,7 +47,7 @@ def coupling_report(scene, base_dir, dt: float, comm=None, warnings=None) -> lis
     return lines
 
 
-def _contact_figures(scene, config, solid, interval: float, warnings) -> list:
+def _contact_figures(scene, config, solid, interval: float, warnings, limits=None) -> list:
     """Per solid: the stiffest particle contact (impact or resting under its weight) against the lightest
     surface node and the surface element size; appends the warnings."""
     from pdemfem.contact.restitution import normal_damping_coefficient
@@ -91,6 +91,10 @@ def _contact_figures(scene, config, solid, interval: float, warnings) -> list:
              f"{node_mass:.3g} kg, element {element_size:.3g} m): held force S_n h^2/(4 m) = {held:.3g} "
              f"(limit {HELD_FORCE_LIMIT:g}), dashpot c h / m = {damping_ratio:.3g} (implicit on the nodes: any value), "
              f"surface compliance S_n/(E l) = {compliance:.3g} (limit {POINT_LOAD_LIMIT:g})"]
+    held_limit = (2.0 * math.sqrt(HELD_FORCE_LIMIT * node_mass / stiffness)
+                  if compliance > SURFACE_COMPLIANCE_LIMIT else math.inf)
+    if limits is not None:
+        limits[config.name] = held_limit
     if warnings is None:
         return lines
     if compliance > POINT_LOAD_LIMIT:
@@ -102,20 +106,24 @@ def _contact_figures(scene, config, solid, interval: float, warnings) -> list:
             f"refinement (docs/coupling.md).  Use surface elements of at least {coarsest:.3g} m there, or a "
             f"stiffer solid material")
     if held > HELD_FORCE_LIMIT and compliance > SURFACE_COMPLIANCE_LIMIT:
-        limit = 2.0 * math.sqrt(HELD_FORCE_LIMIT * node_mass / stiffness)
+        dt = interval / scene.coupling.fem_every
+        action = (f"run lowers fem_every to {math.floor(held_limit / dt)}" if dt <= held_limit else
+                  f"run refuses the scene: time.dt must be <= {held_limit:.3g} s")
         warnings.append(
             f"solid {config.name}: the contact force held over an interval of {interval:.3g} s can overshoot its "
             f"lightest surface node (S_n h^2/(4 m) = {held:.3g} > {HELD_FORCE_LIMIT:g}) on a surface that yields "
-            f"to the contact (S_n/(E l) = {compliance:.3g} > {SURFACE_COMPLIANCE_LIMIT:g}); make the interval "
-            f"fem_every x dt <= {limit:.3g} s (lower fem_every, then dt) or coarsen the contact surface's mesh")
+            f"to the contact (S_n/(E l) = {compliance:.3g} > {SURFACE_COMPLIANCE_LIMIT:g}): the interval "
+            f"fem_every x dt must be <= {held_limit:.3g} s; {action}")
     return lines
 
 
-def coupling_warnings(scene, solids: dict, dt: float) -> list:
-    """Collective: the coupled-stability warnings of `pdemfem check` for already built solids (run)."""
+def coupling_assessment(scene, solids: dict, dt: float) -> tuple:
+    """Collective, for already built solids (run): (the coupled-stability warnings of `pdemfem check`,
+    the longest interval fem_every x dt the held contact force allows over all solids [s])."""
     found = []
+    limits = {}
     interval = scene.coupling.fem_every * dt
     for config in scene.solids:
         if config.contact and scene.particles:
-            _contact_figures(scene, config, solids[config.name], interval, found)
-    return found
+            _contact_figures(scene, config, solids[config.name], interval, found, limits)
+    return found, min(limits.values(), default=math.inf)
