@@ -1,4 +1,4 @@
-"""Strong and weak scaling of the MPI-parallel DEM on the settle scene (issue 6, docs/parallel.md).
+"""Strong and weak scaling of the MPI-parallel DEM on the settle scene (docs/parallel.md).
 
     python benchmarks/scaling.py --mode strong --particles 200000 --ranks 1 2
     python benchmarks/scaling.py --mode weak --per-rank 50000 --ranks 1 2 4

@@ -182,7 +182,7 @@ def run_pdemfem(args) -> dict:
         tiny = Simulation.from_dict(scene_dict(27), comm=comm, output_dir=os.path.join(scratch, "tiny"))
         tiny.step(3)
         compile_seconds = time.perf_counter() - compile_start
-        # Fixed cost of a step (Python, kernel launches) where particles cost nothing (DESIGN.md 7).
+        # Fixed cost of a step (Python, kernel launches) where particles cost nothing.
         overhead_start = time.perf_counter()
         tiny.step(OVERHEAD_STEPS)
         overhead_seconds = comm.allreduce(time.perf_counter() - overhead_start, op=MPI.MAX) / OVERHEAD_STEPS

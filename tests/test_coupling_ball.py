@@ -1,4 +1,4 @@
-"""Ball on block (issue 5 reference case), the rigid limit, the sub-cycling knob and P1 vs P2.
+"""Ball on block (the coupling's reference case), the rigid limit, the sub-cycling knob and P1 vs P2.
 
 Sphere R = 0.2 m (density 10000, E = 1e7, nu = 0.2), restitution 0.2, dropped from centre height 1.0 m
 onto a 1 x 1 x 0.5 m steel block (E = 2e10, nu = 0.29, density 7850) clamped at its base.  The block

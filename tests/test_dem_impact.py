@@ -1,4 +1,4 @@
-"""Verification: single normal and oblique impacts against analytic solutions (issue 3).
+"""Verification: single normal and oblique impacts against analytic solutions.
 
 Every case runs one or two spheres without gravity, records the overlap after each
 step (positions are full-step values x^n of velocity Verlet) and compares with the

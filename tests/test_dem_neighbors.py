@@ -1,4 +1,4 @@
-"""Verification of the neighbour list (pdemfem/neighbors/verlet.py) inside the DEM step (issue 3).
+"""Verification of the neighbour list (pdemfem/neighbors/verlet.py) inside the DEM step.
 
 1. After many steps with rebuilds (skin/2 displacement rule), the contacts the Verlet
    list sees equal the brute-force O(n^2) contact set: no contact is ever missed.

@@ -1,4 +1,4 @@
-"""Parallel agreement of the DEM step on 1, 2 and 3 ranks (issue 3, DESIGN.md 2).
+"""Parallel agreement of the DEM step on 1, 2 and 3 ranks.
 
 The same dense colliding scene (200 spheres thrown into a box, friction, damping,
 size spread) runs for STEPS steps on 1, 2 and 3 ranks; results are gathered by

@@ -1,4 +1,4 @@
-"""Verification: a settled pile carries its weight on the floor; energy bookkeeping (issue 3).
+"""Verification: a settled pile carries its weight on the floor; energy bookkeeping.
 """
 from __future__ import annotations
 

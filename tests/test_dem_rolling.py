@@ -1,4 +1,4 @@
-"""Verification: a sphere sliding into rolling on a plane, and rolling resistance (issue 3).
+"""Verification: a sphere sliding into rolling on a plane, and rolling resistance.
 
 Sphere (mass m, I = 2/5 m R^2) on the floor z = 0 under gravity g, moving along +x,
 spin w about +y (rolling without slip: v = R w).  The contact-point slip is

@@ -1,4 +1,4 @@
-"""Field output of a running simulation (issue 7): particles.h5/.xdmf and <solid>.h5/.xdmf written by
+"""Field output of a running simulation: particles.h5/.xdmf and <solid>.h5/.xdmf written by
 Simulation.run every output interval hold exactly the in-memory state, on 1 and 2 ranks (P1 and P2)."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Spatial decomposition of the DEM on 1-4 ranks (issue 6, DESIGN.md 2; docs/parallel.md).
+"""Spatial decomposition of the DEM on 1-4 ranks (docs/parallel.md).
 
 All scenes are in tests/mpi_cases/parallel_cases.py; one mpiexec launch per rank count runs
 every scenario (module fixture), so the whole file costs four interpreter start-ups.  3 and 4

@@ -1,4 +1,4 @@
-"""Checkpoint/restart of a running simulation (issue 7): exact continuation, other rank counts, errors.
+"""Checkpoint/restart of a running simulation: exact continuation, other rank counts, errors.
 
 The scene (restart_scenes.pile_scene): 96 grains with friction thrown against each other, plane walls
 and a clamped FE plate (P1, fem_every = 2): pair, wall and FE-surface contacts with tangential

@@ -1,4 +1,4 @@
-"""Stopping a run (issue 7): SIGTERM writes a final checkpoint and exits 0; SIGKILL at any moment
+"""Stopping a run: SIGTERM writes a final checkpoint and exits 0; SIGKILL at any moment
 leaves the newest complete checkpoint usable.  Both through the real `pdemfem run` command."""
 from __future__ import annotations
 

@@ -56,7 +56,7 @@ def verlet_restitution(model, gamma, v0, dt):
 
 
 def contact_time(model, v0):
-    """Undamped contact duration (Hertz: DESIGN 1.1; linear: pi sqrt(m/k))."""
+    """Undamped contact duration (Hertz: 2.868 (m*^2/(R* E*^2 v))^(1/5); linear: pi sqrt(m/k))."""
     if model == "hertz_mindlin":
         return 2.868 * (MASS**2 / (RADIUS * E_STAR**2 * v0)) ** 0.2
     return math.pi * math.sqrt(MASS / K_LINEAR)

@@ -1,6 +1,6 @@
 """Scene validation, loading and derived quantities (pdemfem.scene).
 
-Every bad-scene class of issue 3 must give ONE SceneError (exit code 2) whose
+Every bad-scene class must give ONE SceneError (exit code 2) whose
 message names the key path and the fix.  The classes detected only when the
 particles are built (overlapping list insertions, an insertion that cannot place
 its count) are tested through `pdemfem check` / `pdemfem run` in test_cli.py.
@@ -360,7 +360,7 @@ def test_counts_and_memory_estimate():
     assert derived.group_counts(scene) == [100, 2]
     assert derived.particle_count(scene) == 102
     assert derived.memory_estimate_bytes(scene) == 102 * derived.BYTES_PER_PARTICLE
-    assert 400 <= derived.BYTES_PER_PARTICLE <= 1000  # issue 3 target: <= 1 KB per particle
+    assert 400 <= derived.BYTES_PER_PARTICLE <= 1000  # target: <= 1 KB per particle
 
 
 def test_warnings_flag_a_coarse_step():

@@ -1,6 +1,6 @@
 """The coupled step: DEM step, counter-forces to the FE nodes, FE advance, surface update.
 
-Order per DEM step (DESIGN 1.3): the particle system integrates the particles
+Order per DEM step: the particle system integrates the particles
 and computes every contact, including those with the mirrored FE surfaces at
 their current positions; the counter-forces are spread onto FE nodes; the solid
 advances; the mirrored vertices move to the new nodal positions.

@@ -7,7 +7,7 @@
     io.write_checkpoint()                           # every checkpoint interval, at a stop, at the end
     io.close()
 
-Exact continuation (DESIGN.md 7).  A checkpoint is taken at the end of a step; right
+Exact continuation.  A checkpoint is taken at the end of a step; right
 after writing it the running simulation puts itself into the *canonical* state a
 restart rebuilds from the file (`canonicalize`):
 

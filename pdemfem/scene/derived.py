@@ -45,7 +45,7 @@ __all__ = [
     "TUNNEL_TRAVEL",
 ]
 
-# Hertz contact duration prefactor: t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5)  (DESIGN.md 1.1).
+# Hertz contact duration prefactor: t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5).
 HERTZ_DURATION_FACTOR = 2.868
 # A contact is resolved by at least this many steps whatever its damping (peak force and
 # duration of an elastic contact to ~1 %).

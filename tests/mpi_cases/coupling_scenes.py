@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-# The reference ball-on-block case (issue 5): a soft heavy ball on a stiff steel block.
+# The reference ball-on-block case: a soft heavy ball on a stiff steel block.
 BALL_RADIUS = 0.2
 BALL = {"density": 10000.0, "youngs_modulus": 1e7, "poisson_ratio": 0.2}
 BLOCK_STEEL = {"density": 7850.0, "youngs_modulus": 2e10, "poisson_ratio": 0.29}

@@ -1,7 +1,7 @@
 """Scenes and analytic helpers shared by the DEM verification tests (tests/test_dem_*.py)
 and the DEM MPI cases (tests/mpi_cases/dem_*.py).
 
-Everything is SI.  The reference formulas are those of DESIGN.md 1.1; see
+Everything is SI.  The reference formulas (Hertz, restitution) are in docs/verification.md; see
 docs/verification.md for what each test checks.
 """
 from __future__ import annotations

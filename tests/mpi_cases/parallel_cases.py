@@ -1,4 +1,4 @@
-"""MPI cases of the spatial decomposition (tests/test_parallel_decomposition.py, issue 6).
+"""MPI cases of the spatial decomposition (tests/test_parallel_decomposition.py).
 
 usage: parallel_cases.py OUTDIR SCENARIO[,SCENARIO...]
 
