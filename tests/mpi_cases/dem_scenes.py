@@ -1,8 +1,8 @@
 """Scenes and analytic helpers shared by the DEM verification tests (tests/test_dem_*.py)
 and the DEM MPI cases (tests/mpi_cases/dem_*.py).
 
-Everything is SI.  The reference formulas (Hertz, restitution) are in docs/verification.md; see
-docs/verification.md for what each test checks.
+Everything is SI.  The reference formulas (Hertz, restitution) and what each test checks are in
+docs/verification.md.
 """
 from __future__ import annotations
 
