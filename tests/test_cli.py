@@ -242,3 +242,21 @@ def test_rank_local_failure_aborts_instead_of_hanging(workdir, kind, code, expec
     assert expected in completed.stderr, completed.stderr
     if kind == "bug":
         assert "[rank 1] Traceback (most recent call last):" in completed.stderr
+
+
+@pytest.mark.mpi
+def test_launcher_finds_the_environment_commands_without_activation(tmp_path):
+    """`python -m pdemfem.launch -n 2 -- pdemfem ...` through the environment's python, with its bin folder
+    not on PATH: the launcher resolves `pdemfem` beside that python (mpiexec used to exit 134 printing
+    nothing, its own report silenced); an unknown command is a clear exit 2."""
+    bin_folder = str(Path(sys.executable).parent)
+    environment = dict(os.environ)
+    environment["PATH"] = os.pathsep.join(p for p in environment.get("PATH", "").split(os.pathsep)
+                                          if p and Path(p).resolve() != Path(bin_folder).resolve())
+    scene = Path(__file__).resolve().parents[1] / "examples" / "demo.yaml"
+    ran = subprocess.run([sys.executable, "-m", "pdemfem.launch", "-n", "2", "--", "pdemfem", "check", str(scene)],
+                         capture_output=True, text=True, env=environment, cwd=tmp_path, timeout=300)
+    assert ran.returncode == 0 and "scene OK" in ran.stdout, (ran.returncode, ran.stdout, ran.stderr)
+    missing = subprocess.run([sys.executable, "-m", "pdemfem.launch", "-n", "2", "--", "no-such-command"],
+                             capture_output=True, text=True, env=environment, cwd=tmp_path, timeout=60)
+    assert missing.returncode == 2 and "command 'no-such-command' not found" in missing.stderr
