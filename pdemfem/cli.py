@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import inspect
+import math
 import os
 import shutil
 import sys
@@ -399,8 +400,8 @@ def _report(path, scene, base_dir, placed) -> tuple:
     else:
         rayleigh_text = f" = {dt / rayleigh:.3g} x Rayleigh time {rayleigh:.3g} s" if rayleigh else ""
         lines.append(f"time step: dt = {dt:.3g} s (given{rayleigh_text})")
-    steps = scene.time.end / dt
-    lines.append(f"steps: {steps:.4g} to time.end = {scene.time.end:g} s")
+    steps = math.ceil(scene.time.end / dt - 1e-9)  # the count `run` takes (Simulation.run)
+    lines.append(f"steps: {steps} to time.end = {scene.time.end:g} s")
     if total:
         speed, how = derived.impact_speed_estimate(scene)
         lines.append(f"impact speed: {speed:.3g} m/s ({how})")

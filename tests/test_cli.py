@@ -260,3 +260,22 @@ def test_launcher_finds_the_environment_commands_without_activation(tmp_path):
     missing = subprocess.run([sys.executable, "-m", "pdemfem.launch", "-n", "2", "--", "no-such-command"],
                              capture_output=True, text=True, env=environment, cwd=tmp_path, timeout=60)
     assert missing.returncode == 2 and "command 'no-such-command' not found" in missing.stderr
+
+
+def test_check_counts_the_steps_run_takes(tmp_path):
+    """end / dt = 2.5: run takes 3 steps (the last one reaches past end), and check says 3, not 2.5."""
+    from pdemfem.cli import check_report
+
+    path = tmp_path / "scene.yaml"
+    path.write_text(textwrap.dedent("""\
+        time: {end: 0.0025, dt: 0.001}
+        materials:
+          glass: {density: 2500, youngs_modulus: 5.0e6, poisson_ratio: 0.3}
+        particles:
+          - name: one
+            material: glass
+            radius: 0.001
+            insert: {kind: list, positions: [[0, 0, 0]]}
+        """))
+    lines, _ = check_report(str(path))
+    assert "steps: 3 to time.end = 0.0025 s" in lines
