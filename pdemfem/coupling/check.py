@@ -71,12 +71,12 @@ def _contact_figures(scene, config, solid, interval: float, warnings, limits=Non
     for group in scene.particles:
         material = scene.materials[group.material]
         _, radius = derived.group_radius_range(group)
-        mass = 4.0 / 3.0 * math.pi * radius**3 * material.density
+        mass = derived._mass(material, radius)
         # The E* the contact law uses: without the solid's compliance with coupling.contact_modulus particle.
         solid_term = None if scene.coupling.contact_modulus == "particle" else solid_material
         modulus = derived._effective_modulus(material, solid_term)
         # The deeper of the impact's peak overlap and the overlap of the particle resting under its weight.
-        impact = (15.0 * mass * speed**2 / (16.0 * modulus * math.sqrt(radius))) ** 0.4
+        impact = derived._peak_overlap(mass, radius, modulus, speed)
         resting = (mass * gravity / (4.0 / 3.0 * modulus * math.sqrt(radius))) ** (2.0 / 3.0)
         overlap = max(impact, resting)
         stiffness = 2.0 * modulus * math.sqrt(radius * overlap)

@@ -27,7 +27,8 @@ linear and angular momentum to round-off, as without the dashpots.
 
 Energy.  The dissipated energy the contact kernel booked with s_prev is corrected to the
 work the dashpots actually did: on the particle dt F_d · u_p with F_d = -C (u_p - v̄_cur),
-on the solid the kernel's 1/2 m (v^2 - v*^2) per damped node (Solid.damper_work_local).
+on the solid the dashpot impulse times the step's midpoint displacement per damped node
+(kernels.apply_contact_dampers, summed in Solid.damper_work_local).
 """
 from __future__ import annotations
 

@@ -14,12 +14,12 @@ advance (pdemfem.coupling.dampers explains why and how momentum stays exact).
 from __future__ import annotations
 
 import numpy as np
-from mpi4py import MPI
 
 from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_ID, RECORD_INDEX, balance_particles, make_records,
                                       node_dampers)
 from pdemfem.coupling.transfer import (SUB_TRIANGLE_AREA_COORDINATES, parent_faces_from_split, spread_linear,
                                        spread_quadratic)
+from pdemfem.parallel.exchange import allgather_rows
 from pdemfem.walls.mesh import TriangleSurface
 
 
@@ -44,8 +44,6 @@ class CoupledSurface:
         self._advanced_records = np.zeros((0, RECORD_COLUMNS))
         self.particle_system = None  # set by the simulation: the dashpot balance acts on its particles
         self.dissipation_correction_local = 0.0  # [J], this rank's contacts (dampers.balance_particles)
-        self.unbalanced_records = 0  # records whose particle no rank owned any more (lost particles)
-        self.shared_records = 0  # records balanced on another rank than the one that took them
 
     def collect_contact_forces(self, keep_dampers: bool = True) -> None:
         """Add this step's contact counter-forces (this rank's contacts) to the accumulator and keep the
@@ -99,16 +97,12 @@ class CoupledSurface:
         state = system.state
         local_index = self._local_index(records, state)
         if exchange:
-            unmatched = records[local_index < 0]
-            shared = _allgather_rows(system.comm, unmatched)
-            self.shared_records += len(shared)
+            # A record no rank owns any more (its particle was lost) is dropped with the particle.
+            shared = allgather_rows(system.comm, records[local_index < 0], RECORD_COLUMNS)
             if len(shared):
-                shared_index = self._local_index(shared, state, by_id_only=True)
-                found = np.array([np.sum(shared_index >= 0)], dtype=np.int64)
-                system.comm.Allreduce(MPI.IN_PLACE, found, op=MPI.SUM)
-                self.unbalanced_records += len(shared) - int(found[0])
                 records = np.concatenate([records[local_index >= 0], shared])
-                local_index = np.concatenate([local_index[local_index >= 0], shared_index])
+                local_index = np.concatenate([local_index[local_index >= 0],
+                                              self._local_index(shared, state, by_id_only=True)])
         if len(records):
             self.dissipation_correction_local += balance_particles(
                 records, local_index, self.triangles, self.triangle_surface.vertex_velocities, dt,
@@ -130,20 +124,20 @@ class CoupledSurface:
             index[valid] = guess[valid]
             if valid.all():
                 return index
-        missing = index < 0
+        if owned == 0:
+            return index
+        missing = np.flatnonzero(index < 0)
         order = np.argsort(state.ids[:owned], kind="stable")
         sorted_ids = state.ids[:owned][order]
-        position = np.searchsorted(sorted_ids, ids[missing])
-        position = np.minimum(position, max(owned - 1, 0))
-        found = (owned > 0) & (sorted_ids[position] == ids[missing]) if owned else np.zeros(int(missing.sum()), bool)
-        rows = np.flatnonzero(missing)
-        index[rows[found]] = order[position[found]]
+        position = np.minimum(np.searchsorted(sorted_ids, ids[missing]), owned - 1)
+        found = sorted_ids[position] == ids[missing]
+        index[missing[found]] = order[position[found]]
         return index
 
     def checkpoint_records(self, comm) -> np.ndarray:
         """Collective: the dashpot records kept since the last advance, all ranks' rows (on every rank)."""
         local = np.concatenate(self.damper_records) if self.damper_records else np.zeros((0, RECORD_COLUMNS))
-        return _allgather_rows(comm, local)
+        return allgather_rows(comm, local, RECORD_COLUMNS)
 
     def restore_records(self, rows, comm) -> None:
         """Records from a checkpoint: rank 0 keeps them all, the next advance shares them (exchange)."""
@@ -163,15 +157,3 @@ class CoupledSurface:
             velocities = (positions - self._positions_before) / interval
         self.triangle_surface.set_vertices(positions, velocities)
 
-
-def _allgather_rows(comm, rows: np.ndarray) -> np.ndarray:
-    """Every rank's float rows (n_r, RECORD_COLUMNS), concatenated in rank order, on every rank."""
-    rows = np.ascontiguousarray(rows, dtype=np.float64).reshape(-1, RECORD_COLUMNS)
-    if comm.size == 1:
-        return rows.copy()
-    counts = np.zeros(comm.size, dtype=np.int64)
-    comm.Allgather(np.array([rows.size], dtype=np.int64), counts)
-    gathered = np.empty(int(counts.sum()), dtype=np.float64)
-    displacements = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    comm.Allgatherv(rows.ravel(), [gathered, counts, displacements, MPI.DOUBLE])
-    return gathered.reshape(-1, RECORD_COLUMNS)

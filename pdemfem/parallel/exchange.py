@@ -40,6 +40,19 @@ def _alltoallv_rows(comm, rows: np.ndarray, destinations: np.ndarray, width: int
     return received
 
 
+def allgather_rows(comm, rows: np.ndarray, width: int) -> np.ndarray:
+    """Every rank's float rows (n_r, width), concatenated in rank order, on every rank."""
+    rows = np.ascontiguousarray(rows, dtype=np.float64).reshape(-1, width)
+    if comm.size == 1:
+        return rows.copy()
+    counts = np.zeros(comm.size, dtype=np.int64)
+    comm.Allgather(np.array([rows.size], dtype=np.int64), counts)
+    gathered = np.empty(int(counts.sum()), dtype=np.float64)
+    displacements = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    comm.Allgatherv(rows.ravel(), [gathered, counts, displacements, MPI.DOUBLE])
+    return gathered.reshape(-1, width)
+
+
 def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.ndarray:
     """Send owned particles (ghosts already dropped) to their destination ranks.
 
