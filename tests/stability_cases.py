@@ -33,6 +33,16 @@ def contact_period() -> float:
     return 2.0 * math.pi * math.sqrt(mass / stiffness)
 
 
+def energy_scale() -> float:
+    """m g delta: the resting contact's energy scale [J]."""
+    return sphere_mass(BALL_RADIUS, BALL["density"]) * GRAVITY * rest_overlap()
+
+
+def verlet_energy_bound(dt: float) -> float:
+    """Velocity Verlet's energy error on the resting contact's oscillation, (omega_c dt)^2 / 4 of m g delta."""
+    return (2.0 * math.pi / contact_period() * dt) ** 2 / 4.0 * energy_scale()
+
+
 def resting_scene(cells: int, element="P1", mass="lumped", restitution=0.2, friction=0.0, dt=2e-4, fem_every=1,
                   end=1.0, offset=(0.013, 0.007)) -> dict:
     """The sphere at rest at its Hertz overlap, centre `offset` from the top's centre (off the mesh nodes)."""
@@ -67,6 +77,6 @@ def run_resting(scene: dict, output_dir: str, samples: int = 10) -> dict:
         overlaps.append((BALL_RADIUS - (float(sim.particles.positions[0, 2]) - top)) / delta)
         times.append(sim.time)
     return {"times": times, "energy_change": energies, "largest_nodal_speed": speeds, "overlap_ratio": overlaps,
-            "energy_scale": sphere_mass(BALL_RADIUS, BALL["density"]) * GRAVITY * delta,
+            "energy_scale": energy_scale(),
             "substeps": int(sim.coupling.fem_substeps["block"]), "dt": sim.dt,
             "wall_seconds": time.perf_counter() - started}
