@@ -103,9 +103,10 @@ class Simulation:
 
     def _build_particles(self) -> ParticleSystem:
         scene = self.scene
-        tables = build_contact_tables(scene, characteristic_speed=derived.expected_impact_speed(scene))
         validate_scene_coordinates(scene)  # before the insertion bins them (as `pdemfem check`)
         inserted = insert_particles(scene)
+        tables = build_contact_tables(scene, characteristic_speed=derived.expected_impact_speed(scene),
+                                      largest_radius=float(inserted.radii.max()) if len(inserted.radii) else 0.0)
         group_material = np.array([tables.material_names.index(group.material) for group in scene.particles],
                                   dtype=np.int32)
         group_density = np.array([scene.materials[group.material].density for group in scene.particles])
@@ -127,6 +128,7 @@ class Simulation:
             angular_velocities=inserted.angular_velocities[mine],
             temperatures=group_temperature[groups] if total else np.zeros(0),
             wall_count=len(plane_walls),
+            history_width=tables.history_width,
         )
         count = total
         walls = PlaneWalls(plane_walls, tables.material_names)

@@ -121,9 +121,14 @@ _E7 = -1 / 40
 
 
 def _check_model(model: str) -> str:
-    if model not in MODELS:
-        raise ValueError(f"unknown contact model {model!r}; expected one of {', '.join(MODELS)}")
-    return model
+    """The damping law (one of MODELS) of a law or of a registered normal model's name."""
+    if model in MODELS:
+        return model
+    from pdemfem.contact.registry import NORMAL_BY_NAME
+
+    if model in NORMAL_BY_NAME:
+        return NORMAL_BY_NAME[model].DAMPING_LAW
+    raise ValueError(f"unknown contact model {model!r}; expected one of {', '.join(sorted(NORMAL_BY_NAME))}")
 
 
 def _accel(hertz: bool, c: float, x: float, v: float) -> float:

@@ -1,7 +1,8 @@
-"""Per-material-pair contact constants, precomputed once into small tables.
+"""The packed per-row-pair coefficient table the contact kernels read, built once per scene.
 
-Kernels index these tables by the two materials of a contact, so no physics
-constant is recomputed per contact except what depends on the overlap.
+Kernels index ``coefficients[a, b, column]`` by the two rows of a contact (columns:
+pdemfem.contact.layout), so no physics constant is recomputed per contact except what
+depends on the overlap.  Each sub-model fills its own parameter block (its `parameters`).
 
 Rows are the scene's materials, in scene order, followed -- with
 `coupling.contact_modulus: particle` -- by one row per deformable solid's contact
@@ -18,28 +19,48 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pdemfem.contact.restitution import normal_damping_coefficient
-
-MODEL_CODES = {"hertz_mindlin": 0, "linear_spring_dashpot": 1}
+from pdemfem.contact import damping_viscous, layout
+from pdemfem.contact.registry import NORMAL_BY_NAME, ROLLING_BY_NAME, history_layout, normal_bit, rolling_bit
 
 
 @dataclass
 class ContactTables:
     material_names: list                 # row names: the materials, then any solid-surface rows
-    effective_modulus: np.ndarray        # E*  [Pa]
-    effective_shear_modulus: np.ndarray  # G*  [Pa]
-    damping_coefficient: np.ndarray      # gamma: calibrated so the rebound ratio equals `restitution`
-    friction: np.ndarray                 # mu (Coulomb)
-    rolling_friction: np.ndarray         # mu_r (constant directional torque)
-    model_code: np.ndarray               # 0 Hertz-Mindlin, 1 linear spring-dashpot
-    normal_stiffness: np.ndarray         # linear model: k_n [N/m]; 0 = derive per contact
-    tangential_ratio: np.ndarray         # linear model: k_t / k_n
+    coefficients: np.ndarray             # (rows, rows, layout.COLUMNS)
+    composition: int                     # the sub-models in use (layout bits): the kernels' compile-time key
     characteristic_speed: float          # impact speed that defines a derived linear stiffness
     solid_surface_rows: dict = field(default_factory=dict)  # solid name -> its own row (contact_modulus particle)
 
+    # Views of single columns, for code and tests that read one constant.
     @property
-    def rolling_enabled(self) -> bool:
-        return bool(np.any(self.rolling_friction > 0.0))
+    def effective_modulus(self) -> np.ndarray:
+        return self.coefficients[:, :, layout.EFFECTIVE_MODULUS]
+
+    @property
+    def effective_shear_modulus(self) -> np.ndarray:
+        return self.coefficients[:, :, layout.EFFECTIVE_SHEAR_MODULUS]
+
+    @property
+    def damping_coefficient(self) -> np.ndarray:
+        return self.coefficients[:, :, layout.DAMPING]
+
+    @property
+    def friction(self) -> np.ndarray:
+        return self.coefficients[:, :, layout.FRICTION]
+
+    @property
+    def rolling_friction(self) -> np.ndarray:
+        return self.coefficients[:, :, layout.ROLLING_FRICTION]
+
+    @property
+    def cohesion_reach(self) -> float:
+        """The largest distance beyond touching at which some pair still interacts [m] (0: none)."""
+        return float(self.coefficients[:, :, layout.COHESION_REACH].max()) if self.coefficients.size else 0.0
+
+    @property
+    def history_width(self) -> int:
+        """Columns of one contact's history (tangential spring, rolling spring, touching flag)."""
+        return int(history_layout(self.composition)[3])
 
     def surface_row(self, solid_name: str, material: str) -> int:
         """The row a solid's contact surface uses: its own row with contact_modulus particle, else its material's."""
@@ -52,7 +73,8 @@ def _compliances(material) -> tuple:
     return (1.0 - nu * nu) / e, 2.0 * (2.0 - nu) * (1.0 + nu) / e
 
 
-def build_contact_tables(scene, characteristic_speed: float) -> ContactTables:
+def build_contact_tables(scene, characteristic_speed: float, largest_radius: float = 0.0) -> ContactTables:
+    """The packed table of `scene`; `largest_radius` [m] bounds the reach of cohesive pairs."""
     # Each row: (name, material name for the interaction, does the row's body add its compliance to E*, G*).
     rows = [(name, name, True) for name in scene.materials]
     surface_rows = {}
@@ -62,20 +84,8 @@ def build_contact_tables(scene, characteristic_speed: float) -> ContactTables:
                 surface_rows[solid.name] = len(rows)
                 rows.append((f"{solid.material} (surface of solid {solid.name})", solid.material, False))
     count = len(rows)
-    shape = (count, count)
-    tables = ContactTables(
-        material_names=[row[0] for row in rows],
-        effective_modulus=np.zeros(shape),
-        effective_shear_modulus=np.zeros(shape),
-        damping_coefficient=np.zeros(shape),
-        friction=np.zeros(shape),
-        rolling_friction=np.zeros(shape),
-        model_code=np.zeros(shape, dtype=np.int32),
-        normal_stiffness=np.zeros(shape),
-        tangential_ratio=np.zeros(shape),
-        characteristic_speed=float(characteristic_speed),
-        solid_surface_rows=surface_rows,
-    )
+    coefficients = np.zeros((count, count, layout.COLUMNS))
+    composition = 0
     for a, (_, name_a, compliant_a) in enumerate(rows):
         for b, (_, name_b, compliant_b) in enumerate(rows):
             interaction = scene.interaction(name_a, name_b)
@@ -88,12 +98,31 @@ def build_contact_tables(scene, characteristic_speed: float) -> ContactTables:
                     normal, tangential = _compliances(scene.materials[name])
                     compliance += normal
                     shear_compliance += tangential
-            tables.effective_modulus[a, b] = 1.0 / compliance
-            tables.effective_shear_modulus[a, b] = 1.0 / shear_compliance
-            tables.damping_coefficient[a, b] = normal_damping_coefficient(interaction.model, interaction.restitution)
-            tables.friction[a, b] = interaction.friction
-            tables.rolling_friction[a, b] = interaction.rolling_friction
-            tables.model_code[a, b] = MODEL_CODES[interaction.model]
-            tables.normal_stiffness[a, b] = interaction.normal_stiffness or 0.0
-            tables.tangential_ratio[a, b] = interaction.tangential_stiffness_ratio
-    return tables
+            normal_model = NORMAL_BY_NAME[interaction.model]
+            row = coefficients[a, b]
+            row[layout.EFFECTIVE_MODULUS] = 1.0 / compliance
+            row[layout.EFFECTIVE_SHEAR_MODULUS] = 1.0 / shear_compliance
+            row[layout.NORMAL_MODEL] = normal_model.CODE
+            row[layout.DAMPING] = damping_viscous.coefficient(normal_model.DAMPING_LAW, interaction.restitution)
+            row[layout.FRICTION] = interaction.friction
+            row[layout.ROLLING_FRICTION] = interaction.rolling_friction
+            parameters = normal_model.parameters(interaction, row[layout.EFFECTIVE_MODULUS], characteristic_speed)
+            assert len(parameters) <= layout.NORMAL_PARAMETER_COUNT
+            row[layout.NORMAL_PARAMETERS:layout.NORMAL_PARAMETERS + len(parameters)] = parameters
+            composition |= normal_bit(normal_model)
+            if normal_model.COHESIVE:
+                composition |= layout.COHESIVE
+                row[layout.COHESION_REACH] = normal_model.pull_off_distance(
+                    row[layout.NORMAL_PARAMETERS:], row[layout.EFFECTIVE_MODULUS], max(largest_radius, 0.0))
+            if interaction.friction > 0.0:
+                composition |= layout.TANGENTIAL
+            if interaction.rolling_friction > 0.0:
+                rolling_model = ROLLING_BY_NAME[interaction.rolling_model]
+                row[layout.ROLLING_MODEL] = rolling_model.CODE
+                rolling_parameters = rolling_model.parameters(interaction)
+                assert len(rolling_parameters) <= layout.ROLLING_PARAMETER_COUNT
+                row[layout.ROLLING_PARAMETERS:layout.ROLLING_PARAMETERS + len(rolling_parameters)] = rolling_parameters
+                composition |= rolling_bit(rolling_model)
+    return ContactTables(material_names=[row[0] for row in rows], coefficients=coefficients,
+                         composition=int(composition), characteristic_speed=float(characteristic_speed),
+                         solid_surface_rows=surface_rows)

@@ -447,7 +447,7 @@ class SimulationIO:
             velocities=arrays["velocities"] if count else np.zeros((0, 3)),
             angular_velocities=arrays["angular_velocities"] if count else np.zeros((0, 3)),
             temperatures=arrays["temperatures"] if count else np.zeros(0),
-            wall_count=system.walls.count)
+            wall_count=system.walls.count, history_width=system.tables.history_width)
         for name in ("mass", "inverse_mass", "inverse_inertia", "wall_history", "forces", "torques"):
             if count:
                 setattr(state, name, np.ascontiguousarray(arrays[name], dtype=getattr(state, name).dtype))

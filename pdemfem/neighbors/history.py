@@ -1,7 +1,9 @@
-"""Contact records: tangential springs keyed by the two particles' global ids.
+"""Contact records: contact history keyed by the two particles' global ids.
 
-A record is (owner id, partner id, xi_x, xi_y, xi_z), xi oriented for the owner
-(its displacement relative to the partner).  Records are taken from the Verlet
+A record is (owner id, partner id, history...), the history oriented for the owner: its
+columns (tangential spring, rolling spring, touching flag: pdemfem.contact.registry.history_layout)
+are multiplied by `signs` (-1 for a spring, which flips with the pair's order) when the pair is
+seen from the other particle.  Records are taken from the Verlet
 list before a rebuild, travel with their owner when it migrates, and are looked
 up again by (owner id, partner id) through an open-addressing hash table after
 the new list is built.  Both directions are numba loops: O(pairs) each.
@@ -11,39 +13,48 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-RECORD_WIDTH = 5  # owner id, partner id, xi (3)
+RECORD_KEYS = 2  # owner id, partner id; then the history columns
 _EMPTY = -1
 
 
+@njit(inline="always", cache=True)
+def _in_use(history, row):
+    for column in range(history.shape[1]):
+        if history[row, column] != 0.0:
+            return True
+    return False
+
+
 @njit(cache=True)
-def collect_records(row_particles, offsets, partners, history, ids, owned_count):
-    """Records of every spring in use, one per owned particle of the pair."""
+def collect_records(row_particles, offsets, partners, history, ids, owned_count, signs):
+    """Records of every contact with history in use, one per owned particle of the pair."""
+    width = history.shape[1]
     count = 0
     for r in range(row_particles.shape[0]):
         i = row_particles[r]
         for row in range(offsets[r], offsets[r + 1]):
-            if history[row, 0] != 0.0 or history[row, 1] != 0.0 or history[row, 2] != 0.0:
+            if _in_use(history, row):
                 count += (i < owned_count) + (partners[row] < owned_count)
-    records = np.empty((count, RECORD_WIDTH))
+    records = np.empty((count, RECORD_KEYS + width))
     written = 0
     for r in range(row_particles.shape[0]):
         i = row_particles[r]
         for row in range(offsets[r], offsets[r + 1]):
-            if history[row, 0] == 0.0 and history[row, 1] == 0.0 and history[row, 2] == 0.0:
+            if not _in_use(history, row):
                 continue
             j = partners[row]
             if i < owned_count:
                 records[written, 0] = ids[i]
                 records[written, 1] = ids[j]
-                for axis in range(3):
-                    records[written, 2 + axis] = history[row, axis]
+                for column in range(width):
+                    records[written, RECORD_KEYS + column] = history[row, column]
                 written += 1
             if j < owned_count:
-                # xi is the first particle's displacement relative to the second: it flips.
+                # The springs are the first particle's relative to the second: they flip.
                 records[written, 0] = ids[j]
                 records[written, 1] = ids[i]
-                for axis in range(3):
-                    records[written, 2 + axis] = -history[row, axis]
+                for column in range(width):
+                    records[written, RECORD_KEYS + column] = signs[column] * history[row, column]
                 written += 1
     return records
 
@@ -55,8 +66,9 @@ def _slot(owner, partner, mask):
 
 
 @njit(cache=True)
-def restore_records(row_particles, offsets, partners, history, ids, owned_count, records):
+def restore_records(row_particles, offsets, partners, history, ids, owned_count, records, signs):
     """Fill the new list's history from the records (pairs without a record start at zero)."""
+    width = history.shape[1]
     record_count = records.shape[0]
     if record_count == 0:
         return
@@ -77,15 +89,17 @@ def restore_records(row_particles, offsets, partners, history, ids, owned_count,
         i = row_particles[r]
         for row in range(offsets[r], offsets[r + 1]):
             j = partners[row]
-            if i < owned_count:
-                owner, partner, sign = ids[i], ids[j], 1.0
+            flipped = i >= owned_count
+            if flipped:
+                owner, partner = ids[j], ids[i]
             else:
-                owner, partner, sign = ids[j], ids[i], -1.0
+                owner, partner = ids[i], ids[j]
             slot = _slot(owner, partner, mask)
             while table[slot] != _EMPTY:
                 k = table[slot]
                 if np.int64(records[k, 0]) == owner and np.int64(records[k, 1]) == partner:
-                    for axis in range(3):
-                        history[row, axis] = sign * records[k, 2 + axis]
+                    for column in range(width):
+                        value = records[k, RECORD_KEYS + column]
+                        history[row, column] = signs[column] * value if flipped else value
                     break
                 slot = (slot + 1) & mask

@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
-from pdemfem.neighbors.history import RECORD_WIDTH, collect_records, restore_records  # noqa: F401
+from pdemfem.neighbors.history import RECORD_KEYS, collect_records, restore_records  # noqa: F401
 
 # The 13 "forward" neighbour cells: each unordered pair of distinct cells is visited once.
 _FORWARD_OFFSETS = np.array(
@@ -30,7 +30,7 @@ _FORWARD_OFFSETS = np.array(
 
 @njit(cache=True)
 def _fill_pairs(positions, radii, skin, owned_count, order, sorted_cells, starts, dimensions, forward_offsets,
-                offsets, partners):
+                material_index, cohesion_reach, offsets, partners):
     """Write partners row by row (row p = particle order[p]); returns the pair count (may exceed capacity)."""
     count = order.shape[0]
     capacity = partners.shape[0]
@@ -48,6 +48,7 @@ def _fill_pairs(positions, radii, skin, owned_count, order, sorted_cells, starts
         yi = positions[i, 1]
         zi = positions[i, 2]
         reach = radii[i] + skin
+        material_i = material_index[i]
         for k in range(forward_offsets.shape[0] + 1):
             if k == 0:
                 # Own cell: later rows only.
@@ -69,7 +70,8 @@ def _fill_pairs(positions, radii, skin, owned_count, order, sorted_cells, starts
                 dx = xi - positions[j, 0]
                 dy = yi - positions[j, 1]
                 dz = zi - positions[j, 2]
-                cutoff = reach + radii[j]
+                # A cohesive pair interacts until its pull-off distance beyond touching.
+                cutoff = reach + radii[j] + cohesion_reach[material_i, material_index[j]]
                 if dx * dx + dy * dy + dz * dz < cutoff * cutoff:
                     if written < capacity:
                         partners[written] = j
@@ -79,14 +81,28 @@ def _fill_pairs(positions, radii, skin, owned_count, order, sorted_cells, starts
 
 
 class VerletList:
-    """row_particles (rows), offsets (rows+1), partners (int32), history (pairs, 3) aligned with partners."""
+    """row_particles (rows), offsets (rows+1), partners (int32), history (pairs, width) aligned with partners.
 
-    def __init__(self):
+    `history_signs` (one per history column: -1 for a spring, +1 for a symmetric flag) sets the
+    history width (0: no history, e.g. frictionless spheres); `cohesion_reach[a, b]` [m] widens
+    the cutoff of cohesive material pairs beyond touching (pdemfem.contact.tables)."""
+
+    def __init__(self, history_signs=(-1.0, -1.0, -1.0), cohesion_reach=None):
+        self.history_signs = np.asarray(history_signs, dtype=np.float64).reshape(-1)
+        self.cohesion_reach = (np.zeros((1, 1)) if cohesion_reach is None
+                               else np.ascontiguousarray(cohesion_reach, dtype=np.float64))
+        self._clear()
+
+    def _clear(self):
         self.row_particles = np.zeros(0, dtype=np.int64)
         self.offsets = np.zeros(1, dtype=np.int64)
         self.partners = np.zeros(0, dtype=np.int32)
-        self.history = np.zeros((0, 3))
+        self.history = np.zeros((0, len(self.history_signs)))
         self.builds = 0
+
+    @property
+    def largest_reach(self) -> float:
+        return float(self.cohesion_reach.max()) if self.cohesion_reach.size else 0.0
 
     @property
     def pair_count(self) -> int:
@@ -100,10 +116,10 @@ class VerletList:
         """Rebuild over owned particles and ghosts; restore history from contact records."""
         count = state.count
         if count == 0:
-            self.__init__()
+            self._clear()
             self.builds = 1
             return
-        cell_size = 2.0 * float(state.radii.max()) + skin
+        cell_size = 2.0 * float(state.radii.max()) + skin + self.largest_reach
         lower, cell_size, dimensions = cell_grid(state.positions, cell_size)
         cells = cell_indices(state.positions, lower, cell_size, dimensions)
         order = np.argsort(cells, kind="stable")
@@ -112,8 +128,9 @@ class VerletList:
         offsets = np.empty(count + 1, dtype=np.int64)
         # One pass when the capacity guess (last size + margin) suffices, two otherwise.
         partners = np.empty(int(1.25 * self.pair_count) + 4 * count, dtype=np.int32)
+        material_index = state.material_index if self.cohesion_reach.shape[0] > 1 else np.zeros(count, np.int32)
         arguments = (state.positions, state.radii, skin, state.owned_count, order, sorted_cells, starts,
-                     dimensions, _FORWARD_OFFSETS, offsets)
+                     dimensions, _FORWARD_OFFSETS, material_index, self.cohesion_reach, offsets)
         needed = _fill_pairs(*arguments, partners)
         if needed > len(partners):
             partners = np.empty(needed, dtype=np.int32)
@@ -121,14 +138,19 @@ class VerletList:
         self.row_particles = order
         self.offsets = offsets
         self.partners = partners[:needed].copy()
-        self.history = np.zeros((needed, 3))
+        self.history = np.zeros((needed, len(self.history_signs)))
         self._restore(state.ids, state.owned_count, records)
         self.builds += 1
 
     def contact_records(self, ids: np.ndarray, owned_count: int) -> np.ndarray:
         """History of the springs in use, one row per owned particle in contact (see module doc)."""
-        return collect_records(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count)
+        return collect_records(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count,
+                               self.history_signs)
 
     def _restore(self, ids, owned_count, records):
+        records = np.ascontiguousarray(records)
+        if len(records) and records.shape[1] != RECORD_KEYS + len(self.history_signs):
+            raise ValueError(f"contact records of {records.shape[1] - RECORD_KEYS} history columns for a list of "
+                             f"{len(self.history_signs)}")
         restore_records(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count,
-                        np.ascontiguousarray(records))
+                        records, self.history_signs)

@@ -40,7 +40,7 @@ class ParticleState:
     """Spheres: identity, material, size, kinematics, loads and contact history."""
 
     def __init__(self, ids, material_index, radii, densities, positions, velocities, angular_velocities,
-                 temperatures, wall_count: int):
+                 temperatures, wall_count: int, history_width: int = 3):
         count = len(ids)
         self.ids = np.ascontiguousarray(ids, dtype=np.int64)
         self.material_index = np.ascontiguousarray(material_index, dtype=np.int32)
@@ -53,8 +53,8 @@ class ParticleState:
         self.velocities = np.ascontiguousarray(velocities, dtype=np.float64).reshape(count, 3)
         self.angular_velocities = np.ascontiguousarray(angular_velocities, dtype=np.float64).reshape(count, 3)
         self.temperatures = np.ascontiguousarray(temperatures, dtype=np.float64)
-        # Tangential spring of each particle against each analytic wall.
-        self.wall_history = np.zeros((count, max(wall_count, 1), 3))
+        # Contact history (pdemfem.contact.registry.history_layout) of each particle against each plane wall.
+        self.wall_history = np.zeros((count, max(wall_count, 1), history_width))
         self.forces = np.zeros((count, 3))
         self.torques = np.zeros((count, 3))
         self.positions_at_build = self.positions.copy()

@@ -26,7 +26,9 @@ import math
 import numpy as np
 from mpi4py import MPI
 
+from pdemfem.contact import layout
 from pdemfem.contact.forces import pair_forces, plane_wall_forces
+from pdemfem.contact.registry import history_signs
 from pdemfem.neighbors.cells import cell_grid, cell_indices
 from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import recursive_bisection
@@ -51,7 +53,8 @@ class ParticleSystem:
         self.skin = float(skin)
         self.comm = comm
         self.contributors = list(contributors)
-        self.neighbors = VerletList()
+        self.neighbors = VerletList(history_signs(tables.composition),
+                                    np.ascontiguousarray(tables.coefficients[:, :, layout.COHESION_REACH]))
         self.rebalance_threshold = float(rebalance_threshold)
         self.domain_lower = np.full(3, -np.inf)
         self.domain_upper = np.full(3, np.inf)
@@ -73,8 +76,9 @@ class ParticleSystem:
         self.rebalances = 0
         largest_radius = float(state.radii.max()) if state.count else 0.0
         self.largest_radius = comm.allreduce(largest_radius, op=MPI.MAX)
-        # A ghost is needed when it can touch an owned particle before the next rebuild.
-        self.ghost_cutoff = 2.0 * self.largest_radius + self.skin
+        # A ghost is needed when it can touch (or, cohesive, still hold on to) an owned particle before the
+        # next rebuild.
+        self.ghost_cutoff = 2.0 * self.largest_radius + self.skin + tables.cohesion_reach
         self._check_periodic_lengths()
         self._rebuild(force_rebalance=True)
         self._compute_forces()
@@ -172,7 +176,8 @@ class ParticleSystem:
         if self.ghosts is not None:
             self.ghosts.plan_and_send(state)
         self.neighbors.build(state, self.skin, records)
-        self.walls.build_candidates(state.positions[:state.owned_count], state.radii[:state.owned_count], self.skin)
+        self.walls.build_candidates(state.positions[:state.owned_count], state.radii[:state.owned_count],
+                                    self.skin + self.tables.cohesion_reach)
         state.positions_at_build = state.positions.copy()
         if getattr(self, "_pending_rebalance_log", None) is not None and self.comm.size > 1:
             after = self._imbalance(np.ones(state.owned_count) + self._rows_per_particle())
@@ -248,24 +253,17 @@ class ParticleSystem:
         state.torques[:] = 0.0
         walls.forces[:] = 0.0
         owned = state.owned_count
-        rolling = tables.rolling_enabled
         elastic, dissipated, contacts = pair_forces(
             neighbors.row_particles, neighbors.offsets, neighbors.partners, neighbors.history, state.ids, owned,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
-            state.inverse_inertia, state.material_index,
-            tables.effective_modulus, tables.effective_shear_modulus, tables.damping_coefficient,
-            tables.friction, tables.rolling_friction, tables.model_code, tables.normal_stiffness,
-            tables.tangential_ratio, tables.characteristic_speed, self.dt, rolling,
+            state.inverse_inertia, state.material_index, tables.coefficients, tables.composition, self.dt,
             state.forces, state.torques)
         if walls.count:
             wall_elastic, wall_dissipated, wall_contacts = plane_wall_forces(
-                walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities, walls.material_index,
-                state.wall_history, state.positions, state.velocities, state.angular_velocities, state.radii,
-                state.mass, state.inverse_inertia, state.material_index,
-                tables.effective_modulus, tables.effective_shear_modulus, tables.damping_coefficient,
-                tables.friction, tables.rolling_friction, tables.model_code, tables.normal_stiffness,
-                tables.tangential_ratio, tables.characteristic_speed, self.dt, rolling,
-                state.forces, state.torques, walls.forces)
+                walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities,
+                walls.material_index, state.wall_history, state.positions, state.velocities,
+                state.angular_velocities, state.radii, state.mass, state.inverse_inertia, state.material_index,
+                tables.coefficients, tables.composition, self.dt, state.forces, state.torques, walls.forces)
             elastic += wall_elastic
             dissipated += wall_dissipated
             contacts += wall_contacts

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
 from pdemfem.contact.restitution import normal_damping_coefficient
+from pdemfem.contact.registry import damping_law
 from pdemfem.errors import SceneError
 from pdemfem.scene.schema import MaterialConfig, ParticleGroupConfig, RadiusRange, Scene, WallConfig
 
@@ -133,7 +134,7 @@ def linear_equivalent_damping(model: str, restitution: float) -> float:
     """The calibrated damping coefficient as the linear law's gamma (Hertz: sqrt(6/5) gamma_hertz,
     docs/restitution.md identity 2): the measure of how hard the dashpot works during a contact."""
     gamma = normal_damping_coefficient(model, restitution)
-    return gamma * math.sqrt(1.2) if model == "hertz_mindlin" else gamma
+    return gamma * math.sqrt(1.2) if damping_law(model) == "hertz_mindlin" else gamma
 
 
 def steps_per_contact_required(model: str, restitution: float) -> float:

@@ -12,7 +12,11 @@ from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 from pydantic import Field, field_validator, model_validator
 
 from pdemfem.config_types import Box, NonNegativeFloat, PositiveFloat, StrictModel, Vector3  # noqa: F401 (re-exported)
+from pdemfem.contact.registry import NORMAL_BY_NAME, ROLLING_BY_NAME
 from pdemfem.fem.config import SolidConfig
+
+NORMAL_MODEL_NAMES = tuple(NORMAL_BY_NAME)
+ROLLING_MODEL_NAMES = tuple(ROLLING_BY_NAME)
 
 
 class TimeConfig(StrictModel):
@@ -37,16 +41,40 @@ class MaterialConfig(StrictModel):
 
 
 class InteractionConfig(StrictModel):
-    model: Literal["hertz_mindlin", "linear_spring_dashpot"] = "hertz_mindlin"
-    restitution: Annotated[float, Field(gt=0, le=1)] = 0.5
-    friction: NonNegativeFloat = 0.5
-    rolling_friction: NonNegativeFloat = 0.0
+    model: Literal[NORMAL_MODEL_NAMES] = Field(
+        "hertz_mindlin", description="normal contact model: hertz_mindlin (Hertz + Mindlin), linear_spring_dashpot, "
+                                     "jkr (Hertz with JKR adhesion, needs work_of_adhesion)")
+    restitution: Annotated[float, Field(gt=0, le=1)] = Field(
+        0.5, description="coefficient of restitution of a head-on impact (calibrates the normal dashpot exactly)")
+    friction: NonNegativeFloat = Field(0.5, description="Coulomb friction coefficient mu (0: no tangential force "
+                                                        "and no tangential history)")
+    rolling_friction: NonNegativeFloat = Field(0.0, description="rolling resistance mu_r: the rolling moment is at "
+                                                                "most mu_r R* F_n (0: none)")
+    rolling_model: Literal[ROLLING_MODEL_NAMES] = Field(
+        "constant_torque", description="constant_torque (a constant moment against rolling) or elastic_plastic "
+                                       "(a rolling spring-dashpot capped at the limit: bodies come to a true rest)")
+    rolling_damping: Annotated[float, Field(ge=0)] = Field(
+        0.3, description="elastic_plastic only: the rolling dashpot as a fraction of its critical value")
+    work_of_adhesion: NonNegativeFloat = Field(0.0, description="jkr only: work of adhesion W [J/m^2] "
+                                                                "(twice the surface energy of like bodies)")
     # Linear spring-dashpot only: when absent, derived from the materials so that
     # the peak overlap at `expected_impact_speed` equals Hertz's.
-    normal_stiffness: Optional[PositiveFloat] = None
+    normal_stiffness: Optional[PositiveFloat] = Field(
+        None, description="linear_spring_dashpot only: k_n [N/m]; absent: the stiffness giving Hertz's peak "
+                          "overlap at expected_impact_speed")
     tangential_stiffness_ratio: Annotated[float, Field(gt=0)] = Field(
         2.0 / 7.0, description="k_t / k_n for the linear model (2/7 matches normal and tangential periods)"
     )
+
+    @model_validator(mode="after")
+    def _model_parameters(self):
+        if self.model == "jkr" and self.work_of_adhesion <= 0.0:
+            raise ValueError("model jkr needs work_of_adhesion > 0 [J/m^2] (e.g. 0.1); for no adhesion use "
+                             "model hertz_mindlin")
+        if self.model != "jkr" and self.work_of_adhesion > 0.0:
+            raise ValueError(f"work_of_adhesion is used by model jkr only (this interaction's model is "
+                             f"{self.model}): set model: jkr or remove work_of_adhesion")
+        return self
 
 
 class RadiusRange(StrictModel):

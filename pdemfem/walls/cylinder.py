@@ -21,20 +21,19 @@ import math
 import numpy as np
 from numba import njit
 
-from pdemfem.contact.forces import released_spring_energy, rigid_wall_contact
+from pdemfem.contact.response import history_in_use, released_energy, rigid_wall_contact, wall_contact_active
 from pdemfem.walls.mesh import ContributorWall, rotation_matrix
-from pdemfem.walls.triangle_contact import SLOT_COLUMNS
 
 
 @njit(cache=True)
 def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velocity, angular_velocity,
-                    wall_material, history, positions, velocities, angular_velocities, radii, mass,
-                    inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping, friction,
-                    rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt,
-                    rolling_enabled, forces, torques, totals):
-    """Add the cylinder's contact forces on particles [first, last); history (count, 1, 4) per particle.
+                    wall_row, history, positions, velocities, angular_velocities, radii, mass, inverse_inertia,
+                    material_index, coefficients, composition, dt, forces, torques, totals):
+    """Add the cylinder's contact forces on particles [first, last); history (count, 1, width + 1) per
+    particle: the contact history, then the last step's overlap.
 
     Returns (elastic, dissipated, contacts, work done on the particles)."""
+    overlap_column = history.shape[2] - 1
     elastic_total = 0.0
     dissipated_total = 0.0
     work = 0.0
@@ -57,6 +56,7 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         ny = 0.0
         nz = 0.0
         touching = rho > 0.0
+        particle_history = history[i]
         if touching:
             if inside:
                 distance = cylinder_radius - rho
@@ -68,18 +68,15 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
                 nx = rx / rho
                 ny = ry / rho
                 nz = rz / rho
-            touching = distance < radius
-        material_i = material_index[i]
+            touching = wall_contact_active(composition, coefficients, material_index[i], wall_row, radius - distance,
+                                           radius, particle_history, 0)
         if not touching:
-            xi_squared = history[i, 0, 0] ** 2 + history[i, 0, 1] ** 2 + history[i, 0, 2] ** 2
-            if xi_squared > 0.0:
-                dissipated_total += released_spring_energy(
-                    model_code[material_i, wall_material], history[i, 0, 3], xi_squared, mass[i], radius,
-                    effective_modulus[material_i, wall_material], effective_shear_modulus[material_i, wall_material],
-                    normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
-                    characteristic_speed)
-            for column in range(SLOT_COLUMNS):
-                history[i, 0, column] = 0.0
+            if history_in_use(composition, particle_history, 0):
+                dissipated_total += released_energy(composition, coefficients, material_index[i], wall_row,
+                                                    particle_history[0, overlap_column], mass[i], radius,
+                                                    particle_history, 0)
+            for column in range(overlap_column + 1):
+                particle_history[0, column] = 0.0
             continue
         lever = distance
         qx = positions[i, 0] - lever * nx
@@ -93,11 +90,9 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         sy = velocity[1] + angular_velocity[2] * ax - angular_velocity[0] * az
         sz = velocity[2] + angular_velocity[0] * ay - angular_velocity[1] * ax
         fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = rigid_wall_contact(
-            i, nx, ny, nz, distance, sx, sy, sz, wall_material, history[i], 0, velocities, angular_velocities,
-            radii, mass, inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping,
-            friction, rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt,
-            rolling_enabled, forces, torques)
-        history[i, 0, 3] = radius - distance  # this step's overlap
+            composition, i, nx, ny, nz, distance, sx, sy, sz, wall_row, particle_history, 0, velocities,
+            angular_velocities, radii, mass, inverse_inertia, material_index, coefficients, dt, forces, torques)
+        particle_history[0, overlap_column] = radius - distance  # this step's overlap
         elastic_total += elastic
         dissipated_total += dissipated
         work += (fx * sx + fy * sy + fz * sz) * dt
@@ -137,16 +132,14 @@ class CylinderWall(ContributorWall):
 
     def add_forces(self, system, first: int, last: int):
         state, tables = system.state, system.tables
-        history = self._field(state, f"wall:{self.name}:history", (1, SLOT_COLUMNS), np.float64, 0.0)
+        # The contact history, then the last step's overlap (what an opening contact held).
+        history = self._field(state, f"wall:{self.name}:history", (1, tables.history_width + 1), np.float64, 0.0)
         self.totals[:] = 0.0
         elastic, dissipated, contacts, work = cylinder_forces(
             first, last, self.point, self.direction, self.radius, self.inside, self.velocity, self.angular_velocity,
             self.material_index, history, state.positions, state.velocities, state.angular_velocities,
-            state.radii, state.mass, state.inverse_inertia, state.material_index,
-            tables.effective_modulus, tables.effective_shear_modulus, tables.damping_coefficient, tables.friction,
-            tables.rolling_friction, tables.model_code, tables.normal_stiffness, tables.tangential_ratio,
-            tables.characteristic_speed, system.dt, tables.rolling_enabled, state.forces, state.torques,
-            self.totals)
+            state.radii, state.mass, state.inverse_inertia, state.material_index, tables.coefficients,
+            tables.composition, system.dt, state.forces, state.torques, self.totals)
         self.contact_count = int(contacts)
         self._step_work = float(work)
         self.work += self._step_work

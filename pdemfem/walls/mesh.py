@@ -37,7 +37,7 @@ from mpi4py import MPI
 from numba import njit
 
 from pdemfem.walls.bvh import BVH
-from pdemfem.walls.triangle_contact import (DAMPING_RECORD_COLUMNS, SLOT_COLUMNS, largest_displacement,
+from pdemfem.walls.triangle_contact import (DAMPING_RECORD_COLUMNS, largest_displacement,
                                            mesh_contact_forces)
 
 # History slots per particle and mesh: the most patches one sphere touches at once with history
@@ -235,11 +235,12 @@ class TriangleSurface(ContributorWall):
             moved += largest_displacement(self.vertices, self._vertices_at_build, 0, len(self.vertices))
         return moved < skin
 
-    def _rebuild_lists(self, state, first: int, last: int, skin: float) -> None:
+    def _rebuild_lists(self, state, first: int, last: int, skin: float, history_width: int,
+                       cohesion_reach: float) -> None:
         if not self._bvh_current:
             self.bvh.refit(self.vertices)
             self._bvh_current = True
-        reach = state.radii + skin
+        reach = state.radii + skin + cohesion_reach
         self.candidate_offsets, self.candidate_triangles = self.bvh.query(self.vertices, state.positions, reach,
                                                                            first, last)
         self._positions_at_build = state.positions.copy()
@@ -251,7 +252,7 @@ class TriangleSurface(ContributorWall):
         longest = int(np.max(np.diff(self.candidate_offsets))) if state.count else 0
         self._scratch_int = np.zeros((max(longest, 1), 5), dtype=np.int64)
         self._scratch_float = np.zeros((max(longest, 1), 8))
-        self._spare_history = np.zeros((1, SLOT_COLUMNS))
+        self._spare_history = np.zeros((1, history_width + 1))
         if len(self._records.particle) < len(self.candidate_triangles):
             self._allocate_records(len(self.candidate_triangles))
         self.list_builds += 1
@@ -260,10 +261,12 @@ class TriangleSurface(ContributorWall):
     def add_forces(self, system, first: int, last: int):
         state, tables = system.state, system.tables
         slot_patch = self._field(state, f"wall:{self.name}:patch", (self.slots,), np.int32, -1)
-        slot_history = self._field(state, f"wall:{self.name}:history", (self.slots, SLOT_COLUMNS), np.float64, 0.0)
+        # Per slot: the contact history, then the last step's overlap (what an opening contact held).
+        slot_history = self._field(state, f"wall:{self.name}:history", (self.slots, tables.history_width + 1),
+                                   np.float64, 0.0)
         skin = float(self.skin if self.skin is not None else system.skin)
         if not self._lists_valid(state, first, last, skin):
-            self._rebuild_lists(state, first, last, skin)
+            self._rebuild_lists(state, first, last, skin, tables.history_width, tables.cohesion_reach)
         self.totals[:] = 0.0
         if self.spread_to_vertices:
             self.vertex_forces[:] = 0.0
@@ -274,11 +277,8 @@ class TriangleSurface(ContributorWall):
             self.vertex_patch_offsets, self.vertex_patches, self.one_sided, self.material_index,
             slot_patch, slot_history,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
-            state.inverse_inertia, state.material_index,
-            tables.effective_modulus, tables.effective_shear_modulus, tables.damping_coefficient, tables.friction,
-            tables.rolling_friction, tables.model_code, tables.normal_stiffness, tables.tangential_ratio,
-            tables.characteristic_speed, system.dt, tables.rolling_enabled,
-            state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,
+            state.inverse_inertia, state.material_index, tables.coefficients, tables.composition,
+            tables.cohesion_reach, system.dt, state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,
             records.particle, records.triangle, records.weights, records.point, records.force, records.damping,
             self._scratch_int, self._scratch_float, self._spare_history)
         self.contact_count = int(contacts)

@@ -42,7 +42,8 @@ import math
 import numpy as np
 from numba import njit
 
-from pdemfem.contact.forces import released_spring_energy, rigid_wall_contact
+from pdemfem.contact.registry import history_layout
+from pdemfem.contact.response import (history_in_use, pull_off_overlap, released_energy, rigid_wall_contact)
 
 REGION_FACE = 0
 REGION_EDGE_AB = 1
@@ -52,8 +53,8 @@ REGION_VERTEX_A = 4
 REGION_VERTEX_B = 5
 REGION_VERTEX_C = 6
 
-# Columns of the per-particle slot history: tangential spring xi (3) and the overlap of the last step.
-SLOT_COLUMNS = 4
+# A per-particle slot holds the contact history (pdemfem.contact.registry.history_layout), then the
+# overlap of the last step: slot_history has history width + 1 columns.
 # Columns of a contact's dashpot record: c_n, c_t, normal (3), lever, particle contact-point velocity (3),
 # surface velocity at the contact point (3).
 DAMPING_RECORD_COLUMNS = 12
@@ -135,8 +136,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         vertex_patch_offsets, vertex_patches, one_sided, wall_material,
                         slot_patch, slot_history,
                         positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
-                        effective_modulus, effective_shear_modulus, damping, friction, rolling_friction,
-                        model_code, normal_stiffness, tangential_ratio, characteristic_speed, dt, rolling_enabled,
+                        coefficients, composition, cohesion_reach, dt,
                         forces, torques, totals, spread_to_vertices, vertex_forces,
                         record_particle, record_triangle, record_weights, record_point, record_force,
                         record_damping, scratch_int, scratch_float, spare_history):
@@ -148,9 +148,12 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
     wall, and in record_damping the contact's dashpot: c_n, c_t, normal (3), lever (the contact
     point lies lever * normal below the centre), the particle's contact-point velocity (3) and the
     surface velocity there (3), see pdemfem.coupling.dampers).  scratch_int (M, 5) / scratch_float (M, 8) hold the per-patch
-    proposals of one particle (M >= the longest candidate list).
+    proposals of one particle (M >= the longest candidate list).  A cohesive contact (composition) holds
+    beyond touching down to its pull-off overlap: triangles within radius + cohesion_reach propose.
     Returns (elastic, dissipated, contacts, work done on the particles by the wall).
     """
+    touching_column = history_layout(composition)[2]
+    overlap_column = slot_history.shape[2] - 1
     elastic_total = 0.0
     dissipated_total = 0.0
     work = 0.0
@@ -161,7 +164,8 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
         py = positions[i, 1]
         pz = positions[i, 2]
         radius = radii[i]
-        radius_squared = radius * radius
+        reach = radius + cohesion_reach
+        radius_squared = reach * reach
         proposals = 0
         # ---- nearest point of each patch among the candidate triangles
         for k in range(candidate_offsets[i], candidate_offsets[i + 1]):
@@ -277,6 +281,20 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         break
             scratch_float[best, 7] = -1.0 if covered else 1.0
 
+        # ---- a kept proposal that does not touch acts only as a formed cohesive contact above its pull-off
+        if cohesion_reach > 0.0:
+            for j in range(proposals):
+                if scratch_float[j, 7] != 1.0 or scratch_float[j, 0] < radius:
+                    continue
+                holds = False
+                for s in range(slots):
+                    if slot_patch[i, s] == scratch_int[j, 0]:
+                        holds = slot_history[i, s, touching_column] != 0.0 and radius - scratch_float[j, 0] > (
+                            pull_off_overlap(composition, coefficients, material_index[i], wall_material, radius))
+                        break
+                if not holds:
+                    scratch_float[j, 7] = -1.0
+
         # ---- history slots: match kept patches, release the others, then open new ones
         for s in range(slots):
             patch = slot_patch[i, s]
@@ -288,17 +306,12 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                     matched = True
                     break
             if not matched:
-                xi_squared = slot_history[i, s, 0] ** 2 + slot_history[i, s, 1] ** 2 + slot_history[i, s, 2] ** 2
-                if xi_squared > 0.0:
-                    material_i = material_index[i]
-                    dissipated_total += released_spring_energy(
-                        model_code[material_i, wall_material], slot_history[i, s, 3], xi_squared, mass[i], radius,
-                        effective_modulus[material_i, wall_material],
-                        effective_shear_modulus[material_i, wall_material],
-                        normal_stiffness[material_i, wall_material], tangential_ratio[material_i, wall_material],
-                        characteristic_speed)
+                history = slot_history[i]
+                if history_in_use(composition, history, s):
+                    dissipated_total += released_energy(composition, coefficients, material_index[i], wall_material,
+                                                        history[s, overlap_column], mass[i], radius, history, s)
                 slot_patch[i, s] = -1
-                for column in range(SLOT_COLUMNS):
+                for column in range(overlap_column + 1):
                     slot_history[i, s, column] = 0.0
 
         for j in range(proposals):
@@ -328,7 +341,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
             if slot < 0:
                 # More simultaneous contacts than slots: this one runs without history.
                 history = spare_history
-                for column in range(SLOT_COLUMNS):
+                for column in range(overlap_column + 1):
                     spare_history[0, column] = 0.0
                 slot = 0
             a = triangles[t, 0]
@@ -344,11 +357,9 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
             sy = wa * vertex_velocities[a, 1] + wb * vertex_velocities[b, 1] + wc * vertex_velocities[c, 1]
             sz = wa * vertex_velocities[a, 2] + wb * vertex_velocities[b, 2] + wc * vertex_velocities[c, 2]
             fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = rigid_wall_contact(
-                i, nx, ny, nz, distance, sx, sy, sz, wall_material, history, slot, velocities, angular_velocities,
-                radii, mass, inverse_inertia, material_index, effective_modulus, effective_shear_modulus, damping,
-                friction, rolling_friction, model_code, normal_stiffness, tangential_ratio, characteristic_speed,
-                dt, rolling_enabled, forces, torques)
-            history[slot, 3] = radius - distance  # this step's overlap
+                composition, i, nx, ny, nz, distance, sx, sy, sz, wall_material, history, slot, velocities,
+                angular_velocities, radii, mass, inverse_inertia, material_index, coefficients, dt, forces, torques)
+            history[slot, overlap_column] = radius - distance  # this step's overlap
             elastic_total += elastic
             dissipated_total += dissipated
             work += (fx * sx + fy * sy + fz * sz) * dt

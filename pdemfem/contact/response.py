@@ -1,0 +1,197 @@
+"""One contact's force, torque and energies, composed from the scene's sub-models.
+
+`contact_response` is inlined into every contact kernel (pairs, planes, cylinders, triangle
+meshes).  Sign conventions: n points from the partner (j or wall) to the first body i,
+`overlap` is positive in compression, v is i's contact-point velocity minus the partner's and w
+their relative angular velocity; every returned force/moment acts on i (the partner gets the
+opposite).  The Verlet velocities are half-step values (v^{n+1/2}), so v dt is exactly the
+relative displacement of the step, which is what the springs need.
+
+`composition` is a compile-time constant (numba literal): the branches of unused sub-models
+are compiled out (pdemfem.contact.layout, pdemfem.contact.registry).
+"""
+from __future__ import annotations
+
+from numba import njit
+
+from pdemfem.contact.damping_viscous import dashpot
+from pdemfem.contact import tangential_mindlin
+from pdemfem.contact.layout import COHESIVE, DAMPING, FRICTION, NORMAL_MODEL, ROLLING_ANY, ROLLING_MODEL
+from pdemfem.contact.registry import (history_layout, normal_elastic, normal_friction_offset,
+                                      normal_pull_off_overlap, rolling_spring_energy, rolling_torque)
+
+
+@njit(cache=True)
+def pull_off_overlap(composition, coefficients, a, b, effective_radius):
+    """The overlap (<= 0) down to which a formed contact holds; 0 without cohesive models."""
+    if composition & COHESIVE:
+        return normal_pull_off_overlap(int(coefficients[a, b, NORMAL_MODEL]), composition, coefficients, a, b,
+                                       effective_radius)
+    return 0.0
+
+
+@njit(cache=True)
+def history_in_use(composition, history, row):
+    """Whether the contact's history holds anything (a spring or the touching flag)."""
+    width = history_layout(composition)[3]
+    for column in range(width):
+        if history[row, column] != 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _previous_stiffnesses(composition, coefficients, a, b, previous_overlap, effective_mass, effective_radius):
+    """(S_n, S_t, elastic energy) at the previous step's overlap; zeros when it was not a contact."""
+    if previous_overlap > pull_off_overlap(composition, coefficients, a, b, effective_radius) and (
+            previous_overlap > 0.0 or composition & COHESIVE):
+        force, normal_stiffness, tangential_stiffness, energy = normal_elastic(
+            int(coefficients[a, b, NORMAL_MODEL]), composition, previous_overlap, coefficients, a, b,
+            effective_mass, effective_radius)
+        return normal_stiffness, tangential_stiffness, energy
+    return 0.0, 0.0, 0.0
+
+
+@njit(cache=True)
+def released_energy(composition, coefficients, a, b, previous_overlap, effective_mass, effective_radius,
+                    history, row):
+    """Energy a contact held at the previous step's overlap and loses when it opens: its springs'
+    energy, and a cohesive contact's elastic energy (the adhesion hysteresis)."""
+    tangential_column, rolling_column, touching_column, width = history_layout(composition)
+    normal_stiffness, tangential_stiffness, normal_energy = _previous_stiffnesses(
+        composition, coefficients, a, b, previous_overlap, effective_mass, effective_radius)
+    released = 0.0
+    if tangential_column >= 0:
+        released += tangential_mindlin.spring_energy(tangential_stiffness, history, row, tangential_column)
+    if rolling_column >= 0:
+        released += rolling_spring_energy(int(coefficients[a, b, ROLLING_MODEL]), composition, coefficients, a, b,
+                                          normal_stiffness, effective_radius, history, row, rolling_column)
+    # A cohesive contact breaks holding energy (the adhesion hysteresis); a repulsive one opens at
+    # zero overlap, its elastic energy already returned to the motion.
+    if touching_column >= 0 and history[row, touching_column] != 0.0 and pull_off_overlap(
+            composition, coefficients, a, b, effective_radius) < 0.0:
+        released += normal_energy
+    return released
+
+
+@njit(cache=True)
+def clear_history(composition, history, row):
+    width = history_layout(composition)[3]
+    for column in range(width):
+        history[row, column] = 0.0
+
+
+@njit(cache=True)
+def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz,
+                     effective_mass, effective_radius, effective_inertia, history, row, dt):
+    """Force and rolling moment on i for one contact; updates history[row].
+
+    Returns (fx, fy, fz, mx, my, mz, elastic energy, dissipated energy this step, c_n, c_t): the
+    dashpots' force on i is -(c_n n n^T + c_t (I - n n^T)) v; c_n is 0 when the dashpot was
+    clamped and c_t is 0 when the contact slides (the force is then not linear in v).  A
+    deformable surface applies the dashpot to its own nodes at its own rate (pdemfem.coupling.dampers).
+    """
+    tangential_column, rolling_column, touching_column, width = history_layout(composition)
+    elastic_force, normal_stiffness, tangential_stiffness, elastic_energy = normal_elastic(
+        int(coefficients[a, b, NORMAL_MODEL]), composition, overlap, coefficients, a, b, effective_mass,
+        effective_radius)
+    if touching_column >= 0:
+        history[row, touching_column] = 1.0
+
+    # Normal: spring + dashpot; the dashpot never pulls (the force is never below min(elastic, 0)).
+    normal_speed = vx * nx + vy * ny + vz * nz
+    approach_rate = -normal_speed
+    gamma = coefficients[a, b, DAMPING]
+    normal_damping = dashpot(gamma, effective_mass, normal_stiffness)
+    normal_force = elastic_force + normal_damping * approach_rate
+    floor = min(elastic_force, 0.0)
+    if normal_force < floor:
+        normal_force = floor
+        normal_damping = 0.0
+    # Velocity Verlet gives the force of this evaluation the mean of the half-step velocities before and
+    # after it; this contact alone changes the approach rate by dt F_n / m* over the step, so the dashpot's
+    # work is booked at approach - dt F_n / (2 m*) (exact for an isolated contact; with the half-step rate
+    # alone, strong damping (e = 1e-4) booked 5-36 % more than the energy lost).
+    dissipated = (normal_force - elastic_force) * (approach_rate - 0.5 * dt * normal_force / effective_mass) * dt
+    fx = normal_force * nx
+    fy = normal_force * ny
+    fz = normal_force * nz
+    tangential_damping = 0.0
+
+    previous_normal_stiffness = 0.0
+    previous_tangential_stiffness = 0.0
+    if (tangential_column >= 0 or rolling_column >= 0) and history_in_use(composition, history, row):
+        # v dt is the step's relative displacement, so the last step's overlap was overlap - approach dt.
+        previous_normal_stiffness, previous_tangential_stiffness, _ = _previous_stiffnesses(
+            composition, coefficients, a, b, overlap - approach_rate * dt, effective_mass, effective_radius)
+
+    if tangential_column >= 0:
+        friction = coefficients[a, b, FRICTION]
+        if friction > 0.0:
+            load = normal_force
+            if composition & COHESIVE:
+                load += normal_friction_offset(int(coefficients[a, b, NORMAL_MODEL]), composition, coefficients,
+                                               a, b, effective_radius)
+            tangential_damping = dashpot(gamma, effective_mass, tangential_stiffness)
+            tx, ty, tz, tangential_damping, spring_energy, tangential_dissipated = tangential_mindlin.force(
+                nx, ny, nz, vx, vy, vz, normal_speed, tangential_stiffness, previous_tangential_stiffness,
+                tangential_damping, friction * max(load, 0.0), history, row, tangential_column, dt)
+            fx += tx
+            fy += ty
+            fz += tz
+            elastic_energy += spring_energy
+            dissipated += tangential_dissipated
+
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    if composition & ROLLING_ANY:
+        mx, my, mz, rolling_energy, rolling_dissipated = rolling_torque(
+            int(coefficients[a, b, ROLLING_MODEL]), composition, coefficients, a, b, nx, ny, nz, wx, wy, wz,
+            normal_force, normal_stiffness, previous_normal_stiffness, effective_radius, effective_inertia, history,
+            row, rolling_column, dt)
+        elastic_energy += rolling_energy
+        dissipated += rolling_dissipated
+    return fx, fy, fz, mx, my, mz, elastic_energy, dissipated, normal_damping, tangential_damping
+
+
+@njit(cache=True)
+def rigid_wall_contact(composition, i, nx, ny, nz, distance, surface_vx, surface_vy, surface_vz, wall_row,
+                       history, slot, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
+                       coefficients, dt, forces, torques):
+    """Contact of particle i with a rigid wall (R = inf, m = inf): plane, cylinder or triangle.
+
+    n is the wall's normal at the contact point, which lies `distance` below the centre
+    along -n and moves with the surface velocity.  Adds the force and torque to particle i
+    and returns (fx, fy, fz, mx, my, mz, elastic, dissipated, c_n, c_t): the force and rolling couple
+    on the particle (the wall gets the opposite), the contact's energies and its dashpot coefficients.
+    """
+    lever = distance
+    wx = angular_velocities[i, 0]
+    wy = angular_velocities[i, 1]
+    wz = angular_velocities[i, 2]
+    vx = velocities[i, 0] - surface_vx - lever * (wy * nz - wz * ny)
+    vy = velocities[i, 1] - surface_vy - lever * (wz * nx - wx * nz)
+    vz = velocities[i, 2] - surface_vz - lever * (wx * ny - wy * nx)
+    fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = contact_response(
+        composition, coefficients, material_index[i], wall_row, nx, ny, nz, radii[i] - distance, vx, vy, vz,
+        wx, wy, wz, mass[i], radii[i], 1.0 / inverse_inertia[i], history, slot, dt)
+    forces[i, 0] += fx
+    forces[i, 1] += fy
+    forces[i, 2] += fz
+    torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
+    torques[i, 1] += -lever * (nz * fx - nx * fz) + my
+    torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
+    return fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping
+
+
+@njit(cache=True)
+def wall_contact_active(composition, coefficients, a, b, overlap, radius, history, slot):
+    """Whether a particle-wall contact acts at `overlap`: touching, or formed and above the pull-off."""
+    if overlap > 0.0:
+        return True
+    if composition & COHESIVE:
+        touching_column = history_layout(composition)[2]
+        if history[slot, touching_column] != 0.0:
+            return overlap > pull_off_overlap(composition, coefficients, a, b, radius)
+    return False

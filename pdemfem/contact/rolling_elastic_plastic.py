@@ -1,0 +1,95 @@
+"""Rolling model `elastic_plastic`: a rolling spring-dashpot capped at the rolling limit (EPSD).
+
+Model C of Ai, Chen, Rotter & Ooi, Powder Technol. 206 (2011) 269-282 (the "EPSD" rolling
+resistance of LIGGGHTS): an incremental spring moment on the relative rolling rotation,
+
+    M_k += -k_r w_r dt,   k_r = 2.25 mu_r^2 R*^2 S_n,   |M_k| <= mu_r R* F_n  (full mobilisation),
+
+plus a viscous moment M_d = -eta_r 2 sqrt(I* k_r) w_r while the spring is below the limit
+(eta_r: `rolling_damping`, 0.3 by default as Ai et al. recommend; no damping at the limit).
+Unlike the constant torque, a body on a slope flatter than mu_r comes to a true rest.
+The spring moment (on the first body) is the contact's rolling history: it turns with the
+tangent plane and is kept while the contact lasts.  Its energy |M_k|^2 / (2 k_r) is booked as
+elastic; the rest of the moments' work as dissipated.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from pdemfem.contact.layout import ROLLING_FRICTION, ROLLING_PARAMETERS
+
+NAME = "elastic_plastic"
+CODE = 2
+HISTORY_COLUMNS = 3
+
+STIFFNESS_FACTOR = 2.25              # k_r = 2.25 mu_r^2 R*^2 S_n (Iwashita & Oda; Ai et al. eq. 26)
+DAMPING_RATIO = ROLLING_PARAMETERS   # eta_r
+
+
+def parameters(interaction) -> tuple:
+    return (interaction.rolling_damping,)
+
+
+@njit(cache=True)
+def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, previous_normal_stiffness,
+           effective_radius, effective_inertia, history, row, column, dt):
+    mu_r = coefficients[a, b, ROLLING_FRICTION]
+    lever_squared = (mu_r * effective_radius) ** 2
+    stiffness = STIFFNESS_FACTOR * lever_squared * normal_stiffness
+    previous_stiffness = STIFFNESS_FACTOR * lever_squared * previous_normal_stiffness
+    mx = history[row, column]
+    my = history[row, column + 1]
+    mz = history[row, column + 2]
+    old_squared = mx * mx + my * my + mz * mz
+    energy_before = 0.0
+    if old_squared > 0.0:
+        if previous_stiffness > 0.0:
+            energy_before = 0.5 * old_squared / previous_stiffness
+        # Keep the spring in the current tangent plane, with its length.
+        along_normal = mx * nx + my * ny + mz * nz
+        mx -= along_normal * nx
+        my -= along_normal * ny
+        mz -= along_normal * nz
+        new_squared = mx * mx + my * my + mz * mz
+        if new_squared > 0.0:
+            scale = math.sqrt(old_squared / new_squared)
+            mx *= scale
+            my *= scale
+            mz *= scale
+    along_normal = wx * nx + wy * ny + wz * nz
+    rx = wx - along_normal * nx
+    ry = wy - along_normal * ny
+    rz = wz - along_normal * nz
+    mx -= stiffness * rx * dt
+    my -= stiffness * ry * dt
+    mz -= stiffness * rz * dt
+    limit = mu_r * effective_radius * max(normal_force, 0.0)
+    spring_squared = mx * mx + my * my + mz * mz
+    damping = 0.0
+    if spring_squared > limit * limit:
+        scale = limit / math.sqrt(spring_squared)
+        mx *= scale
+        my *= scale
+        mz *= scale
+    elif stiffness > 0.0:
+        damping = coefficients[a, b, DAMPING_RATIO] * 2.0 * math.sqrt(effective_inertia * stiffness)
+    history[row, column] = mx
+    history[row, column + 1] = my
+    history[row, column + 2] = mz
+    energy = 0.5 * (mx * mx + my * my + mz * mz) / stiffness if stiffness > 0.0 else 0.0
+    total_x = mx - damping * rx
+    total_y = my - damping * ry
+    total_z = mz - damping * rz
+    dissipated = -(total_x * rx + total_y * ry + total_z * rz) * dt - (energy - energy_before)
+    return total_x, total_y, total_z, energy, dissipated
+
+
+@njit(cache=True)
+def spring_energy(coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
+    """|M_k|^2 / (2 k_r) at the normal stiffness S_n: what the spring loses when the contact opens."""
+    stiffness = STIFFNESS_FACTOR * (coefficients[a, b, ROLLING_FRICTION] * effective_radius) ** 2 * normal_stiffness
+    if stiffness <= 0.0:
+        return 0.0
+    return 0.5 * (history[row, column] ** 2 + history[row, column + 1] ** 2 + history[row, column + 2] ** 2) / stiffness

@@ -1,0 +1,81 @@
+"""Tangential model `mindlin`: an incremental tangential spring with a dashpot and Coulomb slip.
+
+The spring xi (history) integrates the tangential relative displacement, is turned into the
+current tangent plane keeping its length, and gives F_t = -S_t xi - c_t v_t with S_t from the
+normal model (Hertz/JKR: Mindlin's 8 G* a; linear: ratio k_n).  Beyond the Coulomb limit
+mu (F_n + offset) the force is capped and the spring alone holds it (S_t xi = -F_t).
+(Mindlin & Deresiewicz (1953) in the no-slip-annulus simplification of Tsuji et al., Powder
+Technol. 71 (1992); the history rotation as in LAMMPS' granular `mindlin`.)
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+NAME = "mindlin"
+HISTORY_COLUMNS = 3
+
+
+@njit(cache=True)
+def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, previous_stiffness, damping, friction_limit,
+          history, row, column, dt):
+    """(F_t (3), c_t in effect, spring energy after, spring energy before, dissipated this step); updates xi.
+
+    c_t is 0 when the contact slides (the force is then not linear in v)."""
+    tx = vx - normal_speed * nx
+    ty = vy - normal_speed * ny
+    tz = vz - normal_speed * nz
+    xi_x = history[row, column]
+    xi_y = history[row, column + 1]
+    xi_z = history[row, column + 2]
+    old_length_squared = xi_x * xi_x + xi_y * xi_y + xi_z * xi_z
+    energy_before = 0.0
+    if old_length_squared > 0.0:
+        along_normal = xi_x * nx + xi_y * ny + xi_z * nz
+        xi_x -= along_normal * nx
+        xi_y -= along_normal * ny
+        xi_z -= along_normal * nz
+        new_length_squared = xi_x * xi_x + xi_y * xi_y + xi_z * xi_z
+        if new_length_squared > 0.0:
+            scale = math.sqrt(old_length_squared / new_length_squared)
+            xi_x *= scale
+            xi_y *= scale
+            xi_z *= scale
+        # The energy booked last step used last step's stiffness (Hertz: S_t ~ sqrt(delta)).
+        energy_before = 0.5 * previous_stiffness * (xi_x * xi_x + xi_y * xi_y + xi_z * xi_z)
+    xi_x += tx * dt
+    xi_y += ty * dt
+    xi_z += tz * dt
+    fx = -stiffness * xi_x - damping * tx
+    fy = -stiffness * xi_y - damping * ty
+    fz = -stiffness * xi_z - damping * tz
+    force_squared = fx * fx + fy * fy + fz * fz
+    # Squares compared: the square root is only needed by sliding contacts.
+    if force_squared > friction_limit * friction_limit:
+        # Coulomb slip: cap the force and let the spring alone hold it.  Folding the dashpot into xi
+        # as well, xi = -(F_t + c v_t) / S_t, points xi against the force whenever c |v_t| > mu F_n;
+        # with S_t growing (Hertz) the next step's force then pushes along the slip.
+        scale = friction_limit / math.sqrt(force_squared)
+        damping = 0.0
+        fx *= scale
+        fy *= scale
+        fz *= scale
+        if stiffness > 0.0:
+            xi_x = -fx / stiffness
+            xi_y = -fy / stiffness
+            xi_z = -fz / stiffness
+    history[row, column] = xi_x
+    history[row, column + 1] = xi_y
+    history[row, column + 2] = xi_z
+    energy = 0.5 * stiffness * (xi_x * xi_x + xi_y * xi_y + xi_z * xi_z)
+    # Work taken from the relative motion minus what the spring stored.
+    dissipated = -(fx * tx + fy * ty + fz * tz) * dt - (energy - energy_before)
+    return fx, fy, fz, damping, energy, dissipated
+
+
+@njit(cache=True)
+def spring_energy(stiffness, history, row, column):
+    """1/2 S_t |xi|^2: what a contact that opens with a loaded spring loses."""
+    xi_squared = history[row, column] ** 2 + history[row, column + 1] ** 2 + history[row, column + 2] ** 2
+    return 0.5 * stiffness * xi_squared
