@@ -166,6 +166,8 @@ class GhostExchange:
         if not self.neighbours:
             return
         scatter = self.step_scatter
+        if scatter.registry_version != state.registry_version:  # a field was registered since the rebuild
+            scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
         scatter.pack(state)
         received = self._exchange(scatter.send_buffers, scatter.width, _GHOST_UPDATE_TAG,
                                   counts=self.index_map.receive_counts, receive_buffers=scatter.receive_buffers)

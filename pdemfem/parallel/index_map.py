@@ -45,6 +45,7 @@ class ForwardScatter:
 
     def __init__(self, index_map: ParticleIndexMap, state, flag: str):
         self.index_map = index_map
+        self.registry_version = state.registry_version
         self.layout, self.width = state.layout(flag)
         self.shifted = [state.registry[name].periodic_shift for name, *_ in self.layout]
         self.send_buffers = {n: np.empty((len(index_map.send_rows[n]), self.width)) for n in index_map.neighbours}

@@ -12,12 +12,13 @@ flags decide where it goes:
     checkpoint     written to checkpoints (state_dict) and read back (load_state_dict)
     periodic_shift a position: a ghost of a periodic image gets the image's shift added
 
-Every field is permuted by `reorder` (cell sort) and kept by `keep`.  The core
-fields are attributes (`state.positions`, ...); a module that needs its own
-per-particle state (e.g. mesh-wall contact history) registers it with
-`add_field` and reads it as `state.fields[name]`.  The exchange, the ghost update
-and the checkpoint take their field lists from the registry, so a new field
-needs no change there.
+A field registered between rebuilds reaches the ghosts at the next step (ghost_step) or
+the next rebuild (ghost_rebuild only).  Every field is permuted by `reorder` (cell sort)
+and kept by `keep`.  The core fields are attributes (`state.positions`, ...); a
+module that needs its own per-particle state (e.g. mesh-wall contact history)
+registers it with `add_field` and reads it as `state.fields[name]`.  Migration,
+the ghost exchanges and the checkpoint take their field lists from the registry,
+so a new field needs no change there.
 """
 from __future__ import annotations
 
@@ -96,6 +97,7 @@ class ParticleState(kinds.StateComponent):
         self.torques = np.zeros((count, 3))
         self.positions_at_build = self.positions.copy()
         self.registry = {spec.name: spec for spec in CORE_FIELDS}
+        self.registry_version = 0  # bumped when a field is added or removed (the ghost scatter re-plans)
         self.fields = {}  # the arrays of the fields registered with add_field
         self.owned_count = count
 
@@ -119,12 +121,14 @@ class ParticleState(kinds.StateComponent):
             raise ValueError(f"per-particle field '{spec.name}': ghost_step fields must be float64 (the ghost "
                              f"update copies them through float64 buffers), got {dtype}")
         self.registry[spec.name] = spec
+        self.registry_version += 1
 
     def remove_field(self, name: str) -> np.ndarray:
         """Unregister a field added with add_field; returns its array."""
         if name not in self.fields:
             raise KeyError(f"no per-particle field '{name}' added with add_field")
         del self.registry[name]
+        self.registry_version += 1
         return self.fields.pop(name)
 
     def array(self, name: str) -> np.ndarray:
