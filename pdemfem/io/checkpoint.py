@@ -10,6 +10,9 @@
     checkpoint = read_checkpoint("out/checkpoints/latest.h5", comm, expected_hash=h, force=False)
     checkpoint.attributes["step"], checkpoint.particles["positions"], checkpoint.globals, checkpoint.slabs
 
+    write_state(path, comm, {"particles": system.state_dict(), ...}, attributes, keep=2)   # state dicts
+    checkpoint, state = read_state(path, comm, expected_hash=h)   # the same nesting, plain values
+
 Writing (collective):
 1. particles are sorted by global id across ranks with a parallel sort by regular
    sampling (see `sort_rows_by_key`), so the file is identical for any rank count and
@@ -38,6 +41,7 @@ agree on any error and raise the same CheckpointError.
 File layout::
 
     /            attrs: pdemfem_checkpoint=1, format_version, step, time, scene_hash, ...
+                 (write_state: state_manifest, JSON: each entry's path and kind, the scalars)
     /particles/<field>   (N, ...)  sorted by ids                attrs: sum64
     /contacts/<field>    (K, ...)  sorted by pairs (lexicographic)
     /globals/<name>      arrays identical on all ranks (walls, RNG, insertion)

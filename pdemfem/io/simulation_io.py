@@ -7,19 +7,24 @@
     io.write_checkpoint()                           # every checkpoint interval, at a stop, at the end
     io.close()
 
-Exact continuation.  A checkpoint is taken at the end of a step; right
-after writing it the running simulation puts itself into the *canonical* state a
-restart rebuilds from the file (`canonicalize`):
+State.  Every component of the simulation (solids, coupled surfaces, coupling, walls,
+particles: `components()`) owns its state: a checkpoint is the components' `state_dict()`s
+written by io/checkpoint.py (`write_state`), a restart hands each component its part back
+(`load_state_dict`).  This module knows no component's fields (docs/architecture_state.md).
+
+Exact continuation.  A checkpoint is taken at the end of a step; right after writing it
+the running simulation puts itself into the *canonical* state a restart rebuilds from the
+file: every component's `canonicalize()`, which for
 
 - the particle system migrates, re-sorts (cell, then id) and rebuilds its lists with
   the decomposition kept (ParticleSystem.canonical_rebuild), carrying the last step's
   forces and torques (velocity Verlet's first half kick of the next step needs them;
   recomputing them would update the tangential springs and the dissipation twice, and
   the half-step velocities they were computed with are not stored);
-- triangle surfaces rebuild their BVH from the current vertices and drop their
+- a triangle surface rebuilds its BVH from the current vertices and drops its
   candidate lists;
-- the coupling's counter-forces accumulated since the last FE advance (sub-cycling,
-  rank-local partial sums) are summed over the ranks onto rank 0 before they are written.
+- a coupled surface moves the counter-forces accumulated since the last FE advance
+  (sub-cycling, rank-local partial sums; written summed over the ranks) onto rank 0.
 
 A restart builds the scene as usual, then overwrites every piece of state with the
 file's and calls the same `canonicalize`, so on the same rank count (decomposition
