@@ -2,7 +2,9 @@
 registry decides what migrates, what ghosts carry and what is checkpointed."""
 from __future__ import annotations
 
+import sys
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +17,8 @@ from pdemfem.io.checkpoint import read_state, write_checkpoint, write_state
 from pdemfem.parallel.decomposition import Decomposition
 from pdemfem.parallel.exchange import GhostExchange
 from pdemfem.particles.state import ParticleState
+
+sys.path.insert(0, str(Path(__file__).parent / "mpi_cases"))
 
 
 @pytest.mark.mpi
@@ -147,3 +151,59 @@ def test_ghost_update_allocates_no_arrays():
     # Python bookkeeping (dicts, MPI request objects) is a few hundred bytes; a per-step copy of the
     # ghost rows (what the update did before its buffers were preallocated) is buffer_bytes or more.
     assert buffer_bytes > 20000 and peak < buffer_bytes / 4, (peak, buffer_bytes)
+
+
+# ------------------------------------------------------------------ guards
+
+
+def test_entry_and_state_dict_shape_are_checked(tmp_path):
+    with pytest.raises(ValueError, match="unknown state entry kind"):
+        kinds.Entry("rows", np.zeros(3))
+    with pytest.raises(TypeError, match="expected an Entry or a dict"):
+        kinds.flatten({"a": {"b": np.zeros(3)}})
+    ids = np.arange(4, dtype=np.int64)
+    two_keys = {"a": {"ids": kinds.Entry(kinds.PARTICLE_IDS, ids)}, "b": {"ids": kinds.Entry(kinds.PARTICLE_IDS, ids)}}
+    with pytest.raises(ValueError, match="more than one particle_ids"):
+        write_state(tmp_path / "a.h5", MPI.COMM_SELF, two_keys)
+    with pytest.raises(ValueError, match="without a particle_ids"):
+        write_state(tmp_path / "b.h5", MPI.COMM_SELF, {"a": {"x": kinds.particle_rows(np.zeros(4))}})
+    with pytest.raises(ValueError, match="two entries"):
+        write_state(tmp_path / "c.h5", MPI.COMM_SELF,
+                    {"a|b": kinds.global_array(ids), "a": {"b": kinds.global_array(ids)}})
+    with pytest.raises(ValueError, match="not contiguous"):
+        write_state(tmp_path / "d.h5", MPI.COMM_SELF, {"u": kinds.keyed_slab(np.zeros(2), [0, 2])})
+
+
+def test_a_triangle_surface_refuses_another_vertex_count():
+    from pdemfem.walls.mesh import TriangleSurface
+
+    square = TriangleSurface("lid", [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], 0)
+    triangle = TriangleSurface("lid", [[0, 0, 0], [1, 0, 0], [1, 1, 0]], [[0, 1, 2]], 0)
+    stored = {name: entry.value for name, entry in triangle.state_dict().items()}
+    with pytest.raises(kinds.StateMismatch, match="3 vertices in the checkpoint, 4 in this scene"):
+        square.load_state_dict(stored)
+
+
+def small_scene(out, walls=()) -> dict:
+    import restart_scenes
+
+    scene = restart_scenes.pile_scene(out, 10, 5, 5, count=8)
+    del scene["solids"], scene["coupling"]
+    scene["walls"] += list(walls)
+    return scene
+
+
+def test_a_restart_names_the_state_the_checkpoint_lacks(tmp_path):
+    from pdemfem.simulation import Simulation
+
+    Simulation.from_dict(small_scene(tmp_path), comm=MPI.COMM_WORLD, base_dir=tmp_path).run(progress=False)
+    path = tmp_path / "checkpoints" / "checkpoint_000000000005.h5"
+    drum = {"name": "drum", "kind": "cylinder", "material": "grain", "radius": 0.2,
+            "axis": {"point": [0.1, 0.1, 0.0], "direction": [0, 0, 1]}}
+    with pytest.raises(CheckpointError, match="lacks the state of wall:drum"):
+        Simulation.from_dict(small_scene(tmp_path / "b", [drum]), comm=MPI.COMM_WORLD, base_dir=tmp_path,
+                             restart=path, force=True)
+    floor = {"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1], "material": "grain"}
+    with pytest.raises(CheckpointError, match="plane walls differ"):
+        Simulation.from_dict(small_scene(tmp_path / "c", [floor]), comm=MPI.COMM_WORLD, base_dir=tmp_path,
+                             restart=path, force=True)
