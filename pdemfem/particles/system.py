@@ -41,7 +41,7 @@ log = logging.getLogger("pdemfem")
 REORDER_FRACTION = 0.1
 
 
-class ParticleSystem:
+class ParticleSystem(kinds.StateComponent):
     def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm, contributors=(),
                  domain_box=None, periodic_axes=(), rebalance_threshold: float = 1.2):
         self.state = state
