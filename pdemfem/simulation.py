@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
+from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -27,8 +28,8 @@ from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
 from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
-from pdemfem.scene.loader import load_scene, output_directory
-from pdemfem.walls.mesh import build_contributor_walls
+from pdemfem.scene.loader import load_scene, output_directory, resolve_path
+from pdemfem.walls.factory import build_contributor_walls
 from pdemfem.walls.plane import PlaneWalls
 
 # The skin a scene gets when it names none, as a fraction of the smallest radius:
@@ -62,7 +63,8 @@ class Simulation:
         self.coupling_warnings, interval_limit = (coupling_assessment(scene, self.solids, self.dt) if self.solids
                                                   else ([], math.inf))
         self.fem_every = self._allowed_fem_every(interval_limit)
-        self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt, fem_every=self.fem_every)
+        self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt, fem_every=self.fem_every,
+                                       comm=self.comm)
         self.io = SimulationIO(self, force=force)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
         self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
@@ -133,7 +135,8 @@ class Simulation:
         count = total
         walls = PlaneWalls(plane_walls, tables.material_names)
         # Mesh and cylinder walls, and the solids' contact surfaces, plug into the particle system as contributors.
-        self.contributor_walls = build_contributor_walls(scene, self.base_dir, tables.material_names)
+        self.contributor_walls = build_contributor_walls(scene.walls, tables.material_names,
+                                                         partial(resolve_path, self.base_dir))
         self.coupled_surfaces = [
             CoupledSurface(self.solids[config.name], tables.surface_row(config.name, config.material))
             for config in scene.solids if config.contact
@@ -343,12 +346,8 @@ class Simulation:
 
     def dashpot_dissipation(self) -> float:
         """Collective: energy [J] the contact dashpots on solid surfaces dissipated beyond what the contact
-        kernels booked (coupling/dampers.py): the particle-side correction minus the dashpots' work on
-        the solids' nodes; part of dissipated_energy."""
-        local = np.array([sum(surface.dissipation_correction_local for surface in self.coupled_surfaces)
-                          - sum(solid.damper_work_local for solid in self.solids.values())])
-        self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
-        return float(local[0])
+        kernels booked (CouplingDriver.dashpot_dissipation); part of dissipated_energy."""
+        return self.coupling.dashpot_dissipation()
 
     def total_energy(self) -> float:
         """Everything the bookkeeping tracks; constant up to integration error when no work is

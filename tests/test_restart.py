@@ -136,7 +136,7 @@ def test_checkpoint_errors(serial_run, tmp_path):
     import h5py
 
     with h5py.File(good, "r") as handle:  # flip a byte inside the particle positions
-        offset = handle["particles/positions"].id.get_offset()
+        offset = handle["particles/particles|state|rows|positions"].id.get_offset()
     data[offset + 100] ^= 0xFF
     corrupt.write_bytes(bytes(data))
     with pytest.raises(CheckpointError, match="checksum"):

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from pdemfem.simulation import Simulation
-from pdemfem.walls.mesh import TriangleSurface, rotation_matrix, smooth_patches
+from pdemfem.walls.base import rotation_matrix
+from pdemfem.walls.mesh import TriangleSurface, smooth_patches
 from pdemfem.walls.readers import read_surface
 
 RADIUS = 0.005

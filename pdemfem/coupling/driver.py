@@ -47,10 +47,18 @@ Sub-cycling knobs:
 """
 from __future__ import annotations
 
+import numpy as np
+from mpi4py import MPI
 
-class CouplingDriver:
-    def __init__(self, solids: dict, surfaces: list, dt: float, fem_every: int = 1, prime: bool = True):
-        """Collective.  Call after the particle system has evaluated its initial contacts (F^0)."""
+from pdemfem import state_dict as kinds
+
+
+class CouplingDriver(kinds.StateComponent):
+    def __init__(self, solids: dict, surfaces: list, dt: float, fem_every: int = 1, prime: bool = True,
+                 comm=None):
+        """Collective.  Call after the particle system has evaluated its initial contacts (F^0).
+        comm: the simulation's communicator (default: the solids')."""
+        self.comm = comm if comm is not None else next((solid.comm for solid in solids.values()), MPI.COMM_SELF)
         self.solids = solids
         self.surfaces = surfaces
         self.dt = float(dt)
@@ -101,6 +109,34 @@ class CouplingDriver:
         """Per surface, the impulse [N s] collected since the last advance but not yet given to the solid
         (force sums x dt, this rank's contacts): what the solid still owes the particles within a window."""
         return {surface.name: surface.accumulated_forces.sum(axis=0) * self.dt for surface in self.surfaces}
+
+    def dashpot_dissipation(self) -> float:
+        """Collective: energy [J] the contact dashpots on solid surfaces dissipated beyond what the contact
+        kernels booked (coupling/dampers.py): the particle-side correction minus the dashpots' work on
+        the solids' nodes."""
+        local = np.array([sum(surface.dissipation_correction_local for surface in self.surfaces)
+                          - sum(solid.damper_work_local for solid in self.solids.values())])
+        self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+        return float(local[0])
+
+    # ------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        """Collective: where the sub-cycling window stands and the dashpot dissipation so far."""
+        state = {"steps_since_advance": kinds.scalar(int(self.steps_since_advance)),
+                 "advances": kinds.scalar(int(self.advances)),
+                 "fem_substeps": kinds.scalar({name: int(count) for name, count in self.fem_substeps.items()})}
+        if self.solids:
+            state["dashpot_dissipation"] = kinds.scalar(self.dashpot_dissipation())
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        """After the solids and surfaces (which restart their rank-local dashpot sums at zero): the
+        dissipation up to the checkpoint is booked once, on rank 0's first surface."""
+        self.steps_since_advance = int(state["steps_since_advance"])
+        self.advances = int(state["advances"])
+        self.fem_substeps.update({name: int(count) for name, count in state["fem_substeps"].items()})
+        if self.surfaces and self.comm.rank == 0:
+            self.surfaces[0].dissipation_correction_local = float(state.get("dashpot_dissipation", 0.0))
 
     def refresh_surfaces(self) -> None:
         """Collective: re-mirror the solids' state (e.g. after a restart set the solid state directly)."""

@@ -15,6 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from mpi4py import MPI
+
+from pdemfem import state_dict as kinds
 from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_ID, RECORD_INDEX, balance_particles, make_records,
                                       node_dampers)
 from pdemfem.coupling.transfer import (SUB_TRIANGLE_AREA_COORDINATES, parent_faces_from_split, spread_linear,
@@ -23,7 +26,7 @@ from pdemfem.parallel.exchange import allgather_rows
 from pdemfem.walls.mesh import TriangleSurface
 
 
-class CoupledSurface:
+class CoupledSurface(kinds.StateComponent):
     def __init__(self, solid, material_index: int, smooth_angle: float = 1.0, skin=None):
         self.solid = solid
         self.name = solid.name
@@ -143,6 +146,36 @@ class CoupledSurface:
         """Records from a checkpoint: rank 0 keeps them all, the next advance shares them (exchange)."""
         rows = np.asarray(rows, dtype=float).reshape(-1, RECORD_COLUMNS)
         self.damper_records = [rows.copy()] if len(rows) and comm.rank == 0 else []
+
+    # ------------------------------------------------------------ checkpoints
+    def _window_sums(self, comm) -> tuple:
+        """Collective: the counter-forces accumulated since the last advance summed over the ranks,
+        and every rank's dashpot records of the window (on every rank)."""
+        total = self.accumulated_forces.copy()
+        if comm.size > 1:
+            comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
+        return total, self.checkpoint_records(comm)
+
+    def state_dict(self) -> dict:
+        """Collective: the sub-cycling window so far (the surface's vertices are the wall's state)."""
+        total, records = self._window_sums(self.solid.comm)
+        return {"accumulated_forces": kinds.global_array(total), "damper_records": kinds.global_array(records)}
+
+    def load_state_dict(self, state: dict) -> None:
+        """After the solid's state: its surface positions mirrored; the window's sums kept on rank 0
+        (the rank-local partial sums of the run that wrote them are gone)."""
+        comm = self.solid.comm
+        self.refresh_vertices()
+        self.accumulated_forces[:] = np.asarray(state["accumulated_forces"]) if comm.rank == 0 else 0.0
+        self.restore_records(state["damper_records"], comm)
+        self.dissipation_correction_local = 0.0
+
+    def canonicalize(self) -> None:
+        """Collective: the window's sums moved to rank 0, as a restart has them."""
+        comm = self.solid.comm
+        total, records = self._window_sums(comm)
+        self.accumulated_forces[:] = total if comm.rank == 0 else 0.0
+        self.restore_records(records, comm)
 
     def remember_positions(self) -> None:
         """Keep the mirrored positions before an advance (for the mean surface velocity over it)."""

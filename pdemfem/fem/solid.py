@@ -19,6 +19,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from pdemfem import state_dict as kinds
 from pdemfem.errors import MeshError, SolverError
 from pdemfem.fem import kernels
 from pdemfem.fem.assemble import assemble_operators, ghosted_vector, local_values
@@ -47,7 +48,7 @@ def _sum(comm, value: float) -> float:
     return float(buffer[0])
 
 
-class Solid:
+class Solid(kinds.StateComponent):
     def __init__(self, config: SolidConfig, material, gravity=(0.0, 0.0, -9.81), comm=MPI.COMM_WORLD, base_dir=Path(".")):
         self.config = config
         self.material = material
@@ -430,6 +431,40 @@ class Solid:
     def constrained_dofs(self) -> np.ndarray:
         """Owned dofs (3 per node, x y z) held by fixed or prescribed groups, as a boolean mask (copy)."""
         return self._constrained.copy()
+
+    # ----------------------------------------------------------- checkpoints
+    def _checkpointed_vectors(self) -> dict:
+        return {"u": self.displacement_vec, "v": self.velocity_vec, "a": self.acceleration_vec,
+                "internal": self.internal_force_vec, "load": self.load_vec}
+
+    def state_dict(self) -> dict:
+        """Collective: the FE vectors by input node number (rank-count independent slabs) and the clock."""
+        nodes = np.asarray(self.original_node_ids, dtype=np.int64)
+        state = {key: kinds.keyed_slab(vec.getArray(readonly=True).reshape(-1, 3).copy(), nodes)
+                 for key, vec in self._checkpointed_vectors().items()}
+        state["T"] = kinds.keyed_slab(self.temperature_vec.getArray(readonly=True).copy(), nodes)
+        state["time"] = kinds.scalar(float(self.time))
+        state["step_count"] = kinds.scalar(int(self.step_count))
+        state["external_work"] = kinds.scalar(float(self.external_work))
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        """Collective: this rank's nodes' rows of the stored vectors (read whole, by input node number)."""
+        stored = len(state["u"])
+        if stored != self.n_global_nodes:
+            raise kinds.StateMismatch(f"solid '{self.name}' has {stored} nodes in the checkpoint, "
+                                      f"{self.n_global_nodes} in this scene's mesh")
+        nodes = np.asarray(self.original_node_ids, dtype=np.int64)
+        for key, vec in self._checkpointed_vectors().items():
+            vec.setArray(np.ascontiguousarray(np.asarray(state[key])[nodes]).ravel())
+        temperatures = np.asarray(state["T"])[nodes]
+        if not np.array_equal(temperatures, self.temperatures):
+            self.set_temperature(temperatures)
+        self.displacement_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
+        self.time, self.step_count = float(state["time"]), int(state["step_count"])
+        self.external_work = float(state["external_work"])
+        # The dashpot work since the checkpoint (the coupling keeps the total up to it).
+        self.damper_work_local = 0.0
 
     def set_state(self, displacements, velocities) -> None:
         """Not collective: owned displacements and half-step velocities (n_owned, 3), e.g. from a checkpoint."""

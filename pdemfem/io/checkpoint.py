@@ -10,6 +10,9 @@
     checkpoint = read_checkpoint("out/checkpoints/latest.h5", comm, expected_hash=h, force=False)
     checkpoint.attributes["step"], checkpoint.particles["positions"], checkpoint.globals, checkpoint.slabs
 
+    write_state(path, comm, {"particles": system.state_dict(), ...}, attributes, keep=2)   # state dicts
+    checkpoint, state = read_state(path, comm, expected_hash=h)   # the same nesting, plain values
+
 Writing (collective):
 1. particles are sorted by global id across ranks with a parallel sort by regular
    sampling (see `sort_rows_by_key`), so the file is identical for any rank count and
@@ -38,6 +41,7 @@ agree on any error and raise the same CheckpointError.
 File layout::
 
     /            attrs: pdemfem_checkpoint=1, format_version, step, time, scene_hash, ...
+                 (write_state: state_manifest, JSON: each entry's path and kind, the scalars)
     /particles/<field>   (N, ...)  sorted by ids                attrs: sum64
     /contacts/<field>    (K, ...)  sorted by pairs (lexicographic)
     /globals/<name>      arrays identical on all ranks (walls, RNG, insertion)
@@ -61,11 +65,15 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from pdemfem import state_dict as kinds
 from pdemfem.errors import CheckpointError
 from pdemfem.io import xdmf
 from pdemfem.io.output_guard import agree_on_error, write_error_text
 
-FORMAT_VERSION = 1
+# 2: the simulation's state is stored as its components' state dicts (a JSON manifest maps each
+# dataset and scalar to its component path and kind); version 1 named the datasets by field.
+FORMAT_VERSION = 2
+MANIFEST = "state_manifest"
 MARKER = "pdemfem_checkpoint"
 LATEST = "latest.h5"
 PREFIX = "checkpoint_"
@@ -186,6 +194,13 @@ def _sum64_global(comm, array: np.ndarray) -> int:
 # -------------------------------------------------------------------- write
 
 
+def _json_value(value):
+    """numpy scalars and arrays in JSON attributes (a state dict's scalars may be numpy values)."""
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
 def _encode_attributes(attributes: dict) -> tuple[dict, list]:
     encoded, as_json = {}, []
     for name, value in attributes.items():
@@ -194,7 +209,7 @@ def _encode_attributes(attributes: dict) -> tuple[dict, list]:
         if isinstance(value, (bool, int, float, str)):
             encoded[name] = value
         else:
-            encoded[name] = json.dumps(value)
+            encoded[name] = json.dumps(value, default=_json_value)
             as_json.append(name)
     return encoded, as_json
 
@@ -253,11 +268,12 @@ def _fsync(path: Path, directory: bool = False) -> None:
 def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | None = None,
                      attributes: dict | None = None, slab_arrays: dict | None = None,
                      contact_arrays: dict | None = None, keep: int | None = None,
-                     written: list | None = None) -> Path:
+                     written: list | None = None, particle_key: str = "ids", contact_key: str = "pairs") -> Path:
     """Write one checkpoint atomically (collective); return its path.
 
-    particle_arrays: this rank's owned rows per field, including int64 'ids' (unique).
-    contact_arrays: this rank's contacts, including 'pairs' (K, 2) int64 (or any int64
+    particle_arrays: this rank's owned rows per field, including int64 ids (unique) named
+        `particle_key`.
+    contact_arrays: this rank's contacts, including `contact_key` (K, 2) int64 (or any int64
         key columns), stored sorted by them.
     global_arrays: identical on every rank; rank 0's copy is written.
     slab_arrays: name -> (owned_rows, first_global_row); the slabs of all ranks must tile
@@ -287,7 +303,8 @@ def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | No
     attributes.setdefault("format_version", FORMAT_VERSION)
     encoded, as_json = _encode_attributes(attributes)
     try:
-        _write_file(temporary, comm, encoded, as_json, particle_arrays, global_arrays, slab_arrays, contact_arrays)
+        _write_file(temporary, comm, encoded, as_json, particle_arrays, global_arrays, slab_arrays, contact_arrays,
+                    particle_key, contact_key)
         failure = None
     except (OSError, RuntimeError) as exc:  # disk full, quota, I/O error (h5py: OSError, some RuntimeError)
         failure = write_error_text(exc)
@@ -319,15 +336,16 @@ def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | No
     return path
 
 
-def _write_file(temporary, comm, encoded, as_json, particle_arrays, global_arrays, slab_arrays, contact_arrays):
+def _write_file(temporary, comm, encoded, as_json, particle_arrays, global_arrays, slab_arrays, contact_arrays,
+                particle_key, contact_key):
     with xdmf.open_parallel(temporary, "w", comm) as handle:
         handle.attrs[MARKER] = 1
         for name, value in encoded.items():
             handle.attrs[name] = value
         handle.attrs["json_attributes"] = json.dumps(as_json)
         handle.attrs["ranks_at_write"] = comm.size
-        _write_table(handle, comm, "particles", dict(particle_arrays), "ids")
-        _write_table(handle, comm, "contacts", dict(contact_arrays or {}), "pairs")
+        _write_table(handle, comm, "particles", dict(particle_arrays), particle_key)
+        _write_table(handle, comm, "contacts", dict(contact_arrays or {}), contact_key)
         group = handle.create_group("globals")
         for name, values in sorted((global_arrays or {}).items()):
             values = np.ascontiguousarray(values)
@@ -417,6 +435,10 @@ def _read_local(path: Path, comm, expected_hash, force: bool, expected_version: 
         if MARKER not in attrs:
             raise _Bad("an HDF5 file, but not a pdemfem checkpoint", "give a checkpoint_<step>.h5 or latest.h5")
         version = attrs.get("format_version")
+        if isinstance(version, int) and version < expected_version:
+            raise _Bad(f"written by an older pdemfem (checkpoint format version {version}, this pdemfem reads "
+                       f"version {expected_version})",
+                       "continue it with the pdemfem version that wrote it, or start the run anew")
         if version != expected_version:
             raise _Bad(f"checkpoint format version {version}, this pdemfem reads version {expected_version}",
                        "restart with the pdemfem version that wrote it, or start the run anew")
@@ -492,3 +514,92 @@ def read_checkpoint(path, comm, expected_hash: str | None = None, force: bool = 
     if failure is not None:
         raise CheckpointError(str(path), failure[0], failure[1])
     return result
+
+
+# ------------------------------------------------------------ state dicts
+
+_GROUP_OF_KIND = {kinds.PARTICLE_ROWS: "particles", kinds.PARTICLE_IDS: "particles", kinds.CONTACT_ROWS: "contacts",
+                  kinds.CONTACT_KEYS: "contacts", kinds.GLOBAL: "globals", kinds.SLAB: "slabs"}
+_PATH_SEPARATOR = "|"
+
+
+def write_state(path, comm, state: dict, attributes: dict | None = None, keep: int | None = None,
+                written: list | None = None) -> Path:
+    """Write a nested state dict of Entry leaves (pdemfem.state_dict) as one checkpoint (collective).
+
+    Each array entry goes to the group its kind names (particle rows sorted by the PARTICLE_IDS
+    entry, contact rows by the CONTACT_KEYS entry, global arrays, slabs) under the name of its
+    path; scalars and the path and kind of every entry go to the JSON attribute `state_manifest`,
+    so read_state gives the same nesting back without knowing the components."""
+    tables = {group: {} for group in ("particles", "contacts", "globals", "slabs")}
+    keys = {kinds.PARTICLE_IDS: None, kinds.CONTACT_KEYS: None}
+    manifest = []
+    for entry_path, entry in kinds.flatten(state):
+        name = _PATH_SEPARATOR.join(entry_path)
+        record = {"path": list(entry_path), "kind": entry.kind}
+        if entry.kind == kinds.SCALAR:
+            record["value"] = entry.value
+        else:
+            group = _GROUP_OF_KIND[entry.kind]
+            if name in tables[group]:
+                raise ValueError(f"checkpoint state: two entries are named {name!r}")
+            tables[group][name] = (_slab_rows(comm, name, entry) if entry.kind == kinds.SLAB
+                                   else np.ascontiguousarray(entry.value))
+            if entry.kind in keys:
+                if keys[entry.kind] is not None:
+                    raise ValueError(f"checkpoint state: more than one {entry.kind} entry "
+                                     f"({keys[entry.kind]!r}, {name!r})")
+                keys[entry.kind] = name
+        manifest.append(record)
+    for key_kind, group in ((kinds.PARTICLE_IDS, "particles"), (kinds.CONTACT_KEYS, "contacts")):
+        if tables[group] and keys[key_kind] is None:
+            raise ValueError(f"checkpoint state: {group} rows without a {key_kind} entry to sort them by")
+    attributes = dict(attributes or {})
+    attributes[MANIFEST] = manifest
+    return write_checkpoint(path, comm, particle_arrays=tables["particles"], global_arrays=tables["globals"],
+                            attributes=attributes, slab_arrays=tables["slabs"], contact_arrays=tables["contacts"],
+                            keep=keep, written=written, particle_key=keys[kinds.PARTICLE_IDS] or "ids",
+                            contact_key=keys[kinds.CONTACT_KEYS] or "pairs")
+
+
+def _slab_rows(comm, name: str, entry) -> tuple:
+    """(rows, first row) of a SLAB entry: rows given with their global row numbers are sorted by them
+    across ranks first (collective), so each rank writes one contiguous block."""
+    if entry.keys is None:
+        return np.ascontiguousarray(entry.value), int(entry.first)
+    keys, rows = sort_rows_by_key(comm, entry.keys, {"rows": entry.value})
+    keys = keys[:, 0]
+    first = int(keys[0]) if len(keys) else 0
+    if len(keys) and int(keys[-1]) - first + 1 != len(keys):
+        raise ValueError(f"checkpoint state {name!r}: the global row numbers are not contiguous")
+    return rows["rows"], first
+
+
+def read_state(path, comm, expected_hash: str | None = None, force: bool = False,
+               expected_physics: dict | None = None) -> tuple[Checkpoint, dict]:
+    """Read a checkpoint written by write_state (collective): (Checkpoint, nested state of plain values).
+
+    Particle and contact entries hold this rank's even share of the sorted rows, global arrays,
+    slabs and scalars the whole value (read_checkpoint's errors apply)."""
+    checkpoint = read_checkpoint(path, comm, expected_hash=expected_hash, force=force,
+                                 expected_physics=expected_physics)
+    manifest = checkpoint.attributes.pop(MANIFEST, None)
+    if not isinstance(manifest, list):
+        raise CheckpointError(str(checkpoint.path), "holds no simulation state (no state manifest): written by "
+                                                    "write_checkpoint directly, not by a simulation",
+                              "give a checkpoint a simulation wrote (checkpoint.dir, default <output>/checkpoints)")
+    sources = {"particles": checkpoint.particles, "contacts": checkpoint.contacts, "globals": checkpoint.globals,
+               "slabs": checkpoint.slabs}
+    leaves = []
+    for record in manifest:
+        entry_path = tuple(record["path"])
+        if record["kind"] == kinds.SCALAR:
+            leaves.append((entry_path, record["value"]))
+            continue
+        group = sources[_GROUP_OF_KIND[record["kind"]]]
+        name = _PATH_SEPARATOR.join(entry_path)
+        if name not in group:
+            raise CheckpointError(str(checkpoint.path), f"file is corrupt (the state manifest names {name!r}, the "
+                                                        f"file lacks it)", OLDER_FIX)
+        leaves.append((entry_path, group[name]))
+    return checkpoint, kinds.nest(leaves)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from pdemfem import state_dict as kinds
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
 from pdemfem.neighbors.history import RECORD_KEYS, collect_records, restore_records  # noqa: F401
 
@@ -99,6 +100,8 @@ class VerletList:
         self.partners = np.zeros(0, dtype=np.int32)
         self.history = np.zeros((0, len(self.history_signs)))
         self.builds = 0
+        # Contact records loaded from a checkpoint: used by the next build instead of this list's.
+        self._loaded_records = None
 
     @property
     def largest_reach(self) -> float:
@@ -140,12 +143,36 @@ class VerletList:
         self.partners = partners[:needed].copy()
         self.history = np.zeros((needed, len(self.history_signs)))
         self._restore(state.ids, state.owned_count, records)
+        self._loaded_records = None
         self.builds += 1
 
     def contact_records(self, ids: np.ndarray, owned_count: int) -> np.ndarray:
-        """History of the springs in use, one row per owned particle in contact (see module doc)."""
+        """History of the springs in use, one row per owned particle in contact (see module doc);
+        after load_state_dict, the loaded records until the next build."""
+        if self._loaded_records is not None:
+            return self._loaded_records
         return collect_records(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count,
                                self.history_signs)
+
+    # ------------------------------------------------------------ checkpoints
+    def state_dict(self, ids: np.ndarray, owned_count: int) -> dict:
+        """The contact records as CONTACT_ROWS keyed by the (owner id, partner id) pairs."""
+        records = self.contact_records(ids, owned_count)
+        return {"pairs": kinds.Entry(kinds.CONTACT_KEYS, np.ascontiguousarray(records[:, :2]).astype(np.int64)),
+                "history": kinds.Entry(kinds.CONTACT_ROWS, np.ascontiguousarray(records[:, 2:]))}
+
+    def load_state_dict(self, state: dict, comm=None, ids=None) -> None:
+        """Records from a checkpoint (this rank's share of the pair-sorted rows); with `comm` (several
+        ranks) they are routed to the rank whose (id-sorted) share of the particles, `ids`, holds
+        their owner.  The next build restores them."""
+        from pdemfem.parallel.exchange import route_records_to_owner_share
+
+        pairs = np.asarray(state["pairs"])
+        history = np.asarray(state["history"], dtype=np.float64)
+        records = np.column_stack([pairs.astype(np.float64), history])  # widths from the arrays
+        if comm is not None and comm.size > 1:
+            records = route_records_to_owner_share(comm, ids, records)
+        self._loaded_records = np.ascontiguousarray(records)
 
     def _restore(self, ids, owned_count, records):
         records = np.ascontiguousarray(records)

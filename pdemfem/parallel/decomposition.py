@@ -14,6 +14,8 @@ import numpy as np
 from mpi4py import MPI
 from numba import njit
 
+from pdemfem import state_dict as kinds
+
 # Bisection iterations for each cut; 2^-40 of the region's extent is far below
 # any particle size.
 CUT_ITERATIONS = 40
@@ -41,6 +43,20 @@ class Decomposition:
 
     def owners(self, positions: np.ndarray) -> np.ndarray:
         return _owners(positions, self.node_axis, self.node_cut, self.node_left, self.node_right)
+
+    @property
+    def rank_count(self) -> int:
+        return len(self.boxes)
+
+    # The boxes and the cut tree: the same on every rank (GLOBAL arrays of a checkpoint).
+    _STATE = ("boxes", "node_axis", "node_cut", "node_left", "node_right")
+
+    def state_dict(self) -> dict:
+        return {name: kinds.global_array(getattr(self, name)) for name in self._STATE}
+
+    @classmethod
+    def from_state_dict(cls, state: dict) -> "Decomposition":
+        return cls(*(np.asarray(state[name]) for name in cls._STATE))
 
 
 @njit(cache=True)

@@ -15,6 +15,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem.parallel.decomposition import box_distance
+from pdemfem.parallel.index_map import ForwardScatter, ParticleIndexMap
 
 # Fixed tags are safe: the particle system talks on a private duplicate of the user's communicator
 # (pdemfem.parallel.api_safety), so no message of the user's code can match them.
@@ -38,6 +39,20 @@ def _alltoallv_rows(comm, rows: np.ndarray, destinations: np.ndarray, width: int
     comm.Alltoallv([send, (send_items, send_displacements), MPI.DOUBLE],
                    [received.reshape(-1), (receive_items, receive_displacements), MPI.DOUBLE])
     return received
+
+
+def route_records_to_owner_share(comm, ids: np.ndarray, records: np.ndarray) -> np.ndarray:
+    """Send each record (owner id first) to the rank whose id-sorted, contiguous share of the
+    particles (`ids`, as a checkpoint is read back) holds its owner id."""
+    first_ids = np.array(comm.allgather(int(ids[0]) if len(ids) else None), dtype=object)
+    ranks = np.array([r for r, value in enumerate(first_ids) if value is not None], dtype=np.int64)
+    starts = np.array([first_ids[r] for r in ranks], dtype=np.int64)
+    owners = records[:, 0].astype(np.int64) if len(records) else np.zeros(0, np.int64)
+    if len(ranks) == 0:
+        destinations = np.zeros(len(owners), dtype=np.int64)
+    else:
+        destinations = ranks[np.maximum(np.searchsorted(starts, owners, side="right") - 1, 0)]
+    return _alltoallv_rows(comm, np.ascontiguousarray(records, dtype=np.float64), destinations, records.shape[1])
 
 
 def allgather_rows(comm, rows: np.ndarray, width: int) -> np.ndarray:
@@ -89,7 +104,8 @@ def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.nd
 
 
 class GhostExchange:
-    """Which owned particles are sent as ghosts to which neighbour, and the exchanges themselves."""
+    """Which owned particles are sent as ghosts to which neighbour (a ParticleIndexMap, chosen at every
+    rebuild), and the exchanges: in full at a rebuild, the `ghost_step` fields every step."""
 
     def __init__(self, comm, decomposition, cutoff: float, periodic_lengths: np.ndarray):
         self.comm = comm
@@ -109,12 +125,12 @@ class GhostExchange:
                 if _box_gap(my_lower + shift, my_upper + shift, boxes[other, 0], boxes[other, 1]) < self.cutoff:
                     self.targets.append((other, shift, boxes[other, 0], boxes[other, 1]))
         self.neighbours = sorted({target[0] for target in self.targets})
-        self.send_rows = {}
-        self.send_shifts = {}
-        self.receive_counts = {}
+        self.index_map = None
+        self.step_scatter = None
 
     def plan_and_send(self, state) -> None:
-        """Choose the ghosts to send (at a rebuild), send them in full, append those received."""
+        """Choose the ghosts to send (at a rebuild), send them in full, append those received, and
+        size the per-step scatter's buffers for the new index map."""
         owned = state.owned_count
         positions = state.positions[:owned]
         rows = {neighbour: [] for neighbour in self.neighbours}
@@ -123,50 +139,46 @@ class GhostExchange:
             near = np.flatnonzero(box_distance(positions + shift, lower, upper) < self.cutoff)
             rows[other].append(near)
             shifts[other].append(np.tile(shift, (len(near), 1)))
-        self.send_rows = {n: np.concatenate(rows[n]).astype(np.int64) if rows[n] else np.zeros(0, np.int64)
-                          for n in self.neighbours}
-        self.send_shifts = {n: np.concatenate(shifts[n]) if shifts[n] else np.zeros((0, 3))
-                            for n in self.neighbours}
+        send_rows = {n: np.concatenate(rows[n]).astype(np.int64) if rows[n] else np.zeros(0, np.int64)
+                     for n in self.neighbours}
+        send_shifts = {n: np.ascontiguousarray(np.concatenate(shifts[n])) if shifts[n] else np.zeros((0, 3))
+                       for n in self.neighbours}
         layout, width = state.ghost_layout()
-        position_column = next(start for name, start, *_ in layout if name == "positions")
         outgoing = {}
         for neighbour in self.neighbours:
-            packed = state.pack_rows(self.send_rows[neighbour], layout, width)
-            packed[:, position_column:position_column + 3] += self.send_shifts[neighbour]
+            packed = state.pack_rows(send_rows[neighbour], layout, width)
+            for name, start, columns, _, _ in layout:
+                if state.registry[name].periodic_shift:
+                    packed[:, start:start + columns] += send_shifts[neighbour]
             outgoing[neighbour] = packed
-        received = self._exchange(outgoing, width, _GHOST_TAG, counts_known=False)
+        received = self._exchange(outgoing, width, _GHOST_TAG, counts=None)
+        receive_counts = {}
         for neighbour in self.neighbours:
-            self.receive_counts[neighbour] = len(received[neighbour])
+            receive_counts[neighbour] = len(received[neighbour])
             if len(received[neighbour]):
                 state.append_rows(received[neighbour], layout, as_ghosts=True)
+        self.index_map = ParticleIndexMap(owned, self.neighbours, send_rows, send_shifts, receive_counts)
+        self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
 
     def update(self, state) -> None:
-        """Refresh ghost positions and velocities (every step between rebuilds)."""
+        """Refresh the ghosts' `ghost_step` fields (every step between rebuilds): owned rows packed into
+        the preallocated send buffers, received into the preallocated receive buffers."""
         if not self.neighbours:
             return
-        outgoing = {}
-        for neighbour in self.neighbours:
-            rows = self.send_rows[neighbour]
-            packed = np.empty((len(rows), 9))
-            packed[:, 0:3] = state.positions[rows] + self.send_shifts[neighbour]
-            packed[:, 3:6] = state.velocities[rows]
-            packed[:, 6:9] = state.angular_velocities[rows]
-            outgoing[neighbour] = packed
-        received = self._exchange(outgoing, 9, _GHOST_UPDATE_TAG, counts_known=True)
-        start = state.owned_count
-        for neighbour in self.neighbours:
-            block = received[neighbour]
-            stop = start + len(block)
-            state.positions[start:stop] = block[:, 0:3]
-            state.velocities[start:stop] = block[:, 3:6]
-            state.angular_velocities[start:stop] = block[:, 6:9]
-            start = stop
+        scatter = self.step_scatter
+        if scatter.registry_version != state.registry_version:  # a field was registered since the rebuild
+            scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
+        scatter.pack(state)
+        received = self._exchange(scatter.send_buffers, scatter.width, _GHOST_UPDATE_TAG,
+                                  counts=self.index_map.receive_counts, receive_buffers=scatter.receive_buffers)
+        scatter.unpack(state, received)
 
-    def _exchange(self, outgoing: dict, width: int, tag: int, counts_known: bool) -> dict:
+    def _exchange(self, outgoing: dict, width: int, tag: int, counts, receive_buffers=None) -> dict:
+        """Point-to-point rows to every neighbour; `counts` None: the counts are exchanged first.
+        receive_buffers: where to receive (preallocated); the own rank's rows (periodic images) are
+        then read from its send buffer."""
         comm, rank = self.comm, self.comm.rank
-        if counts_known:
-            counts = self.receive_counts
-        else:
+        if counts is None:
             counts = {}
             requests = []
             count_buffers = {n: np.empty(1, dtype=np.int64) for n in self.neighbours}
@@ -185,15 +197,14 @@ class GhostExchange:
         requests = []
         for neighbour in self.neighbours:
             if neighbour == rank:
-                received[neighbour] = outgoing[neighbour].copy()
+                received[neighbour] = outgoing[neighbour] if receive_buffers is not None else outgoing[neighbour].copy()
                 continue
-            received[neighbour] = np.empty((counts[neighbour], width))
+            received[neighbour] = (receive_buffers[neighbour] if receive_buffers is not None
+                                   else np.empty((counts[neighbour], width)))
             requests.append(comm.Irecv(received[neighbour], source=neighbour, tag=tag + 1))
-        sends = []
         for neighbour in self.neighbours:
             if neighbour != rank:
-                sends.append(np.ascontiguousarray(outgoing[neighbour]))
-                requests.append(comm.Isend(sends[-1], dest=neighbour, tag=tag + 1))
+                requests.append(comm.Isend(outgoing[neighbour], dest=neighbour, tag=tag + 1))
         MPI.Request.Waitall(requests)
         return received
 

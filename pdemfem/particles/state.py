@@ -3,40 +3,79 @@
 Kernels read and write these arrays directly; nothing here holds scene objects.
 Rows [0, owned_count) are the particles this rank integrates; rows after them
 are ghost copies of neighbours' particles (read-only inputs to the contact
-kernels, refreshed every step).  Every per-particle array is permuted by
-`reorder` (cell sort) and travels with a particle when it migrates
-(`pack_rows` / `append_rows`).  Core fields are listed below; a module that
-needs its own per-particle state (e.g. mesh-wall contact history) registers it
-with `add_field` and reads it as `state.fields[name]`.
+kernels).  Every per-particle array is a registered *field* (`FieldSpec`); its
+flags decide where it goes:
+
+    migrate        travels with an owned particle to the rank that owns it next (rebuilds)
+    ghost_rebuild  sent in full to the ghost copies when the ghosts are chosen (rebuilds)
+    ghost_step     refreshed on the ghost copies every step between rebuilds (float64 only)
+    checkpoint     written to checkpoints (state_dict) and read back (load_state_dict)
+    periodic_shift a position: a ghost of a periodic image gets the image's shift added
+
+A field registered between rebuilds reaches the ghosts at the next step (ghost_step) or
+the next rebuild (ghost_rebuild only).  Every field is permuted by `reorder` (cell sort)
+and kept by `keep`.  The core fields are attributes (`state.positions`, ...); a
+module that needs its own per-particle state (e.g. mesh-wall contact history)
+registers it with `add_field` and reads it as `state.fields[name]`.  Migration,
+the ghost exchanges and the checkpoint take their field lists from the registry,
+so a new field needs no change there.
 """
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass
+
 import numpy as np
 
-# Fields that define a particle and move with it between ranks.
-MIGRATING_FIELDS = (
-    "ids",
-    "material_index",
-    "radii",
-    "mass",
-    "inverse_mass",
-    "inverse_inertia",
-    "positions",
-    "velocities",
-    "angular_velocities",
-    "temperatures",
-    "wall_history",
+from pdemfem import state_dict as kinds
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    name: str
+    migrate: bool = True
+    ghost_rebuild: bool = False
+    ghost_step: bool = False
+    checkpoint: bool = True
+    periodic_shift: bool = False
+
+    def flags(self) -> dict:
+        flags = asdict(self)
+        flags.pop("name")
+        return flags
+
+
+def _core(name, **flags) -> FieldSpec:
+    return FieldSpec(name, **flags)
+
+
+# What a ghost carries: everything the contact kernels read of a partner; positions and
+# velocities change every step, the rest only at a rebuild.
+_GHOST = {"ghost_rebuild": True}
+_GHOST_STEP = {"ghost_rebuild": True, "ghost_step": True}
+CORE_FIELDS = (
+    _core("ids", **_GHOST),
+    _core("material_index", **_GHOST),
+    _core("radii", **_GHOST),
+    _core("mass", **_GHOST),
+    _core("inverse_mass", **_GHOST),
+    _core("inverse_inertia", **_GHOST),
+    _core("positions", periodic_shift=True, **_GHOST_STEP),
+    _core("velocities", **_GHOST_STEP),
+    _core("angular_velocities", **_GHOST_STEP),
+    _core("temperatures", **_GHOST),
+    # Tangential spring of each particle against each analytic wall.
+    _core("wall_history"),
+    # The last step's loads: recomputed after every migration, but a checkpoint keeps them
+    # (velocity Verlet's first half kick of the next step needs them).
+    _core("forces", migrate=False),
+    _core("torques", migrate=False),
+    _core("positions_at_build", migrate=False, checkpoint=False),
 )
-# Per-step scratch, recomputed after every migration.
-SCRATCH_FIELDS = ("forces", "torques", "positions_at_build")
-# What a ghost copy carries: everything the contact kernels read of a partner.
-GHOST_FIELDS = ("ids", "material_index", "radii", "mass", "inverse_mass", "inverse_inertia", "positions",
-                "velocities", "angular_velocities", "temperatures")
-# Refreshed every step between list builds.
-GHOST_UPDATE_FIELDS = ("positions", "velocities", "angular_velocities")
+# Fields that define a particle and move with it between ranks.
+MIGRATING_FIELDS = tuple(spec.name for spec in CORE_FIELDS if spec.migrate)
 
 
-class ParticleState:
+class ParticleState(kinds.StateComponent):
     """Spheres: identity, material, size, kinematics, loads and contact history."""
 
     def __init__(self, ids, material_index, radii, densities, positions, velocities, angular_velocities,
@@ -58,30 +97,57 @@ class ParticleState:
         self.forces = np.zeros((count, 3))
         self.torques = np.zeros((count, 3))
         self.positions_at_build = self.positions.copy()
-        self.fields = {}
+        self.registry = {spec.name: spec for spec in CORE_FIELDS}
+        self.registry_version = 0  # bumped when a field is added or removed (the ghost scatter re-plans)
+        self.fields = {}  # the arrays of the fields registered with add_field
         self.owned_count = count
 
     # ------------------------------------------------------------ fields
-    def add_field(self, name: str, tail_shape: tuple = (), dtype=np.float64, fill=0) -> np.ndarray:
-        """Register an extra per-particle array of shape (count, *tail_shape); it migrates."""
-        if name in self.fields:
+    def add_field(self, name: str, tail_shape: tuple = (), dtype=np.float64, fill=0, *, migrate: bool = True,
+                  ghost_rebuild: bool = False, ghost_step: bool = False, checkpoint: bool = True,
+                  periodic_shift: bool = False) -> np.ndarray:
+        """Register an extra per-particle array of shape (count, *tail_shape) (flags: module docstring)."""
+        if name in self.registry:
             raise ValueError(f"per-particle field '{name}' registered twice")
+        self._register(FieldSpec(name, migrate=migrate, ghost_rebuild=ghost_rebuild, ghost_step=ghost_step,
+                                 checkpoint=checkpoint, periodic_shift=periodic_shift), np.dtype(dtype))
         self.fields[name] = np.full((self.count, *tail_shape), fill, dtype=dtype)
         return self.fields[name]
 
-    def _arrays(self, names):
-        for name in names:
-            yield name, getattr(self, name)
+    def _register(self, spec: FieldSpec, dtype) -> None:
+        if (spec.ghost_step or spec.periodic_shift) and not spec.ghost_rebuild:
+            raise ValueError(f"per-particle field '{spec.name}': a field refreshed on ghosts every step (or "
+                             f"shifted for periodic images) must also be sent at rebuilds (ghost_rebuild)")
+        if spec.ghost_step and dtype != np.float64:
+            raise ValueError(f"per-particle field '{spec.name}': ghost_step fields must be float64 (the ghost "
+                             f"update copies them through float64 buffers), got {dtype}")
+        self.registry[spec.name] = spec
+        self.registry_version += 1
 
-    def _all_arrays(self):
-        yield from self._arrays(MIGRATING_FIELDS + SCRATCH_FIELDS)
-        yield from self.fields.items()
+    def remove_field(self, name: str) -> np.ndarray:
+        """Unregister a field added with add_field; returns its array."""
+        if name not in self.fields:
+            raise KeyError(f"no per-particle field '{name}' added with add_field")
+        del self.registry[name]
+        self.registry_version += 1
+        return self.fields.pop(name)
+
+    def array(self, name: str) -> np.ndarray:
+        return self.fields[name] if name in self.fields else getattr(self, name)
 
     def _set(self, name, values):
         if name in self.fields:
             self.fields[name] = values
         else:
             setattr(self, name, values)
+
+    def field_names(self, flag: str) -> list:
+        """Names of the registered fields with the given flag set (registration order)."""
+        return [name for name, spec in self.registry.items() if getattr(spec, flag)]
+
+    def _all_arrays(self):
+        for name in self.registry:
+            yield name, self.array(name)
 
     @property
     def count(self) -> int:
@@ -109,26 +175,28 @@ class ParticleState:
         if self.ghost_count:
             self.keep(np.arange(self.owned_count))
 
-    def _layout(self, names_and_arrays):
+    def layout(self, flag: str):
+        """([(name, first column, columns, tail shape, dtype)], width) of the fields with `flag`
+        packed side by side into float64 rows."""
         layout, width = [], 0
-        for name, values in names_and_arrays:
+        for name in self.field_names(flag):
+            values = self.array(name)
             columns = int(np.prod(values.shape[1:], dtype=np.int64))
             layout.append((name, width, columns, values.shape[1:], values.dtype))
             width += columns
         return layout, width
 
     def migrating_layout(self):
-        return self._layout(list(self._arrays(MIGRATING_FIELDS)) + list(self.fields.items()))
+        return self.layout("migrate")
 
     def ghost_layout(self):
-        return self._layout(self._arrays(GHOST_FIELDS))
+        return self.layout("ghost_rebuild")
 
     def pack_rows(self, rows: np.ndarray, layout, width) -> np.ndarray:
         """Rows of the named fields as one float64 matrix (ids and ints are exact below 2^53)."""
         packed = np.empty((len(rows), width))
         for name, start, columns, _, _ in layout:
-            values = self.fields[name] if name in self.fields else getattr(self, name)
-            packed[:, start:start + columns] = values[rows].reshape(len(rows), columns)
+            packed[:, start:start + columns] = self.array(name)[rows].reshape(len(rows), columns)
         return packed
 
     def append_rows(self, packed: np.ndarray, layout, as_ghosts: bool) -> None:
@@ -136,11 +204,10 @@ class ParticleState:
         count = len(packed)
         given = {name for name, *_ in layout}
         for name, start, columns, tail, dtype in layout:
-            values = self.fields[name] if name in self.fields else getattr(self, name)
             new = packed[:, start:start + columns].reshape((count, *tail))
             if np.issubdtype(dtype, np.integer):
                 new = np.rint(new)
-            self._set(name, np.ascontiguousarray(np.concatenate([values, new.astype(dtype)])))
+            self._set(name, np.ascontiguousarray(np.concatenate([self.array(name), new.astype(dtype)])))
         for name, values in self._all_arrays():
             if name not in given:
                 self._set(name, np.ascontiguousarray(
@@ -150,3 +217,35 @@ class ParticleState:
 
     def nbytes(self) -> int:
         return sum(values.nbytes for _, values in self._all_arrays())
+
+    # ------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        """The owned rows of every checkpointed field (PARTICLE_ROWS, keyed by ids), and the flags of
+        the fields added with add_field (so a restart registers them before their owner asks)."""
+        owned = self.owned_count
+        rows = {"ids": kinds.Entry(kinds.PARTICLE_IDS, self.ids[:owned])}
+        for name in self.field_names("checkpoint"):
+            if name != "ids":
+                rows[name] = kinds.particle_rows(self.array(name)[:owned])
+        return {"rows": rows, "added_fields": kinds.scalar({name: self.registry[name].flags() for name in self.fields
+                                                            if self.registry[name].checkpoint})}
+
+    def load_state_dict(self, state: dict) -> None:
+        """This rank's share of the stored particles replaces every row (ghosts included); fields the
+        file holds that are not registered yet are registered with their stored flags."""
+        rows = state["rows"]
+        for name, flags in state["added_fields"].items():
+            if name not in self.registry and name in rows:
+                self._register(FieldSpec(name, **flags), np.asarray(rows[name]).dtype)
+                self.fields[name] = np.asarray(rows[name])
+        missing = sorted(name for name in self.field_names("checkpoint") if name not in rows)
+        if missing:
+            raise kinds.StateMismatch(f"lacks the per-particle state {missing} this scene needs")
+        count = len(rows["ids"])
+        for name, values in self._all_arrays():
+            if self.registry[name].checkpoint:
+                self._set(name, np.ascontiguousarray(rows[name], dtype=values.dtype))
+            else:
+                self._set(name, np.zeros((count, *values.shape[1:]), dtype=values.dtype))
+        self.positions_at_build = self.positions.copy()
+        self.owned_count = count

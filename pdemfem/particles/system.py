@@ -27,11 +27,12 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem.contact import layout
+from pdemfem import state_dict as kinds
 from pdemfem.contact.forces import pair_forces, plane_wall_forces
 from pdemfem.contact.registry import history_signs
 from pdemfem.neighbors.cells import cell_grid, cell_indices
 from pdemfem.neighbors.verlet import VerletList
-from pdemfem.parallel.decomposition import recursive_bisection
+from pdemfem.parallel.decomposition import Decomposition, recursive_bisection
 from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.integrate import drift, kick
@@ -42,7 +43,7 @@ log = logging.getLogger("pdemfem")
 REORDER_FRACTION = 0.1
 
 
-class ParticleSystem:
+class ParticleSystem(kinds.StateComponent):
     def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm, contributors=(),
                  domain_box=None, periodic_axes=(), rebalance_threshold: float = 1.2):
         self.state = state
@@ -132,17 +133,53 @@ class ParticleSystem:
         (velocity Verlet's first half kick needs them).  `records`: contact-history rows
         (owner id, partner id, xi) to restore instead of the current list's.
         """
-        from pdemfem.parallel.exchange import GhostExchange
-
         state = self.state
         for name in ("forces", "torques"):
-            state.add_field(f"carry:{name}", (3,))[:] = getattr(state, name)
+            state.add_field(f"carry:{name}", (3,), checkpoint=False)[:] = getattr(state, name)
         if decomposition is not None:
             self.decomposition = decomposition
             self.ghosts = GhostExchange(self.comm, decomposition, self.ghost_cutoff, self.periodic_lengths)
         self._rebuild(records=records, canonical=True)
         for name in ("forces", "torques"):
-            setattr(state, name, state.fields.pop(f"carry:{name}"))
+            setattr(state, name, state.remove_field(f"carry:{name}"))
+
+    # ---------------------------------------------------------------- checkpoints
+    def state_dict(self) -> dict:
+        """Collective: the particles, their contact records, the decomposition and the running totals."""
+        state = self.state
+        result = {"state": state.state_dict(), "contacts": self.neighbors.state_dict(state.ids, state.owned_count)}
+        if self.decomposition is not None:
+            result["decomposition"] = self.decomposition.state_dict()
+        result["totals"] = {"dissipated_energy": kinds.scalar(float(self.dissipated_energy)),
+                            "elastic_energy": kinds.scalar(float(self.elastic_energy)),
+                            "contact_count": kinds.scalar(int(self.contact_count)),
+                            "lost_particles": kinds.scalar(int(self.lost_particles)),
+                            "rebalances": kinds.scalar(int(self.rebalances))}
+        return result
+
+    def load_state_dict(self, stored: dict) -> None:
+        """Collective: this rank's share of the stored particles (id order) and the records of their
+        contacts; the stored decomposition when it was written on as many ranks as run now (else the
+        next rebuild re-partitions).  canonicalize() then rebuilds from exactly this."""
+        self.state.load_state_dict(stored["state"])
+        self.neighbors = VerletList(self.neighbors.history_signs, self.neighbors.cohesion_reach)
+        self.neighbors.load_state_dict(stored["contacts"], self.comm, self.state.ids)
+        decomposition = stored.get("decomposition")
+        if decomposition is not None and len(decomposition["boxes"]) == self.comm.size:
+            self.decomposition = Decomposition.from_state_dict(decomposition)
+            self.ghosts = GhostExchange(self.comm, self.decomposition, self.ghost_cutoff, self.periodic_lengths)
+        else:
+            self.decomposition = None
+            self.ghosts = None
+        totals = stored["totals"]
+        self.dissipated_energy = float(totals["dissipated_energy"])
+        self.elastic_energy = float(totals["elastic_energy"])
+        self.contact_count = int(totals["contact_count"])
+        self.lost_particles = int(totals["lost_particles"])
+        self.rebalances = int(totals["rebalances"])
+
+    def canonicalize(self) -> None:
+        self.canonical_rebuild()
 
     def _rebuild(self, force_rebalance: bool = False, records=None, canonical: bool = False) -> None:
         """Migrate, (re)balance, sort, exchange ghosts and rebuild the list, keeping contact history."""

@@ -21,8 +21,9 @@ import math
 import numpy as np
 from numba import njit
 
+from pdemfem import state_dict as kinds
 from pdemfem.contact.response import history_in_use, released_energy, rigid_wall_contact, wall_contact_active
-from pdemfem.walls.mesh import ContributorWall, rotation_matrix
+from pdemfem.walls.base import ContributorWall, rotation_matrix
 
 
 @njit(cache=True)
@@ -129,6 +130,18 @@ class CylinderWall(ContributorWall):
         self.time += dt
         self.point = self.reference_point + self.time * self.velocity
         self.direction = rotation_matrix(self.angular_velocity * self.time) @ self.reference_direction
+
+    def state_dict(self) -> dict:
+        state = super().state_dict()
+        state.update(time=kinds.scalar(float(self.time)), point=kinds.global_array(self.point),
+                     direction=kinds.global_array(self.direction))
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        super().load_state_dict(state)
+        self.time = float(state["time"])
+        self.point = np.array(state["point"], dtype=float)
+        self.direction = np.array(state["direction"], dtype=float)
 
     def add_forces(self, system, first: int, last: int):
         state, tables = system.state, system.tables

@@ -33,9 +33,10 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
-from mpi4py import MPI
 from numba import njit
 
+from pdemfem import state_dict as kinds
+from pdemfem.walls.base import ContributorWall, rotation_matrix
 from pdemfem.walls.bvh import BVH
 from pdemfem.walls.triangle_contact import (DAMPING_RECORD_COLUMNS, largest_displacement,
                                            mesh_contact_forces)
@@ -126,53 +127,6 @@ def vertex_patch_table(triangles, patch, vertex_count: int):
     return np.cumsum(offsets), np.ascontiguousarray(pairs[:, 1], dtype=np.int32)
 
 
-def rotation_matrix(rotation_vector) -> np.ndarray:
-    """Rodrigues: the rotation by |phi| about phi / |phi|."""
-    phi = np.asarray(rotation_vector, dtype=float)
-    angle = float(np.linalg.norm(phi))
-    if angle == 0.0:
-        return np.eye(3)
-    k = phi / angle
-    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
-
-
-# --------------------------------------------------------------------------- contributor base
-
-
-class ContributorWall:
-    """Totals every contributor wall keeps: force and moment on the wall, work done on the particles."""
-
-    def __init__(self, name: str):
-        self.name = name
-        # force (3) and moment about the origin (3) on the wall, this step, summed over ranks after reduce.
-        self.totals = np.zeros(6)
-        self.work = 0.0
-        self._step_work = 0.0
-
-    @property
-    def force(self) -> np.ndarray:
-        """Total contact force the particles exert on the wall (N)."""
-        return self.totals[:3].copy()
-
-    def torque(self, about=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """Moment of the particles' contact forces on the wall about the point `about` (N m)."""
-        about = np.asarray(about, dtype=float)
-        return self.totals[3:] - np.cross(about, self.totals[:3])
-
-    def reduce(self, comm) -> None:
-        buffer = np.append(self.totals, self._step_work)
-        comm.Allreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)
-        self.totals[:] = buffer[:6]
-        self.work += buffer[6] - self._step_work
-
-    @staticmethod
-    def _field(state, name: str, tail_shape, dtype, fill):
-        if name not in state.fields:
-            state.add_field(name, tail_shape, dtype, fill)
-        return state.fields[name]
-
-
 class TriangleSurface(ContributorWall):
     """Triangles the particles touch; vertices may move every step (see module docstring)."""
 
@@ -218,6 +172,28 @@ class TriangleSurface(ContributorWall):
 
     def move(self, dt: float) -> None:
         """A surface driven from outside (set_vertices) does not move by itself."""
+
+    # ------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        state = super().state_dict()
+        state["vertices"] = kinds.global_array(self.vertices)
+        state["vertex_velocities"] = kinds.global_array(self.vertex_velocities)
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        super().load_state_dict(state)
+        vertices = np.asarray(state["vertices"])
+        if vertices.shape != self.vertices.shape:
+            raise kinds.StateMismatch(f"wall '{self.name}' has {len(vertices)} vertices in the checkpoint, "
+                                      f"{len(self.vertices)} in this scene")
+        self.set_vertices(vertices, state["vertex_velocities"])
+
+    def canonicalize(self) -> None:
+        """The search structure rebuilt from the current vertices alone and no candidate list kept, as a
+        restart from a checkpoint of this step has them (the candidates are rebuilt on first use)."""
+        self.bvh.build(self.vertices)
+        self._bvh_current = True
+        self._list_key = None
 
     # ------------------------------------------------------------ candidate lists
     def _allocate_records(self, capacity: int) -> None:
@@ -317,6 +293,15 @@ class MeshWall(TriangleSurface):
     def moving(self) -> bool:
         return bool(np.any(self.velocity) or np.any(self.angular_velocity))
 
+    def state_dict(self) -> dict:
+        state = super().state_dict()
+        state["time"] = kinds.scalar(float(self.time))
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        super().load_state_dict(state)
+        self.time = float(state["time"])
+
     @property
     def center(self) -> np.ndarray:
         return self.reference_center + self.time * self.velocity
@@ -332,31 +317,3 @@ class MeshWall(TriangleSurface):
         rotation = rotation_matrix(self.angular_velocity * self.time)
         positions = center + (self.reference_vertices - self.reference_center) @ rotation.T
         self.set_vertices(positions, self._vertex_velocities(positions, center))
-
-
-# --------------------------------------------------------------------------- from a scene
-
-
-def build_contributor_walls(scene, base_dir, material_names, skin=None) -> list:
-    """MeshWall / CylinderWall objects for the scene's mesh and cylinder walls, in scene order."""
-    from pdemfem.errors import MeshError, SceneError
-    from pdemfem.scene.loader import resolve_path
-    from pdemfem.walls.cylinder import CylinderWall
-    from pdemfem.walls.readers import read_surface
-
-    walls = []
-    for index, wall in enumerate(scene.walls):
-        material = material_names.index(wall.material)
-        if wall.kind == "mesh":
-            path = resolve_path(base_dir, wall.file)
-            try:
-                vertices, triangles = read_surface(path, wall.scale)
-            except MeshError as error:
-                raise SceneError(f"walls[{index}].file", f"{path}: {error.problem}", error.fix) from None
-            walls.append(MeshWall(wall.name, vertices, triangles, material, velocity=wall.velocity,
-                                  angular_velocity=wall.angular_velocity, center=wall.center,
-                                  smooth_angle=wall.smooth_angle, one_sided=wall.one_sided, skin=skin))
-        elif wall.kind == "cylinder":
-            walls.append(CylinderWall(wall.name, wall.axis.point, wall.axis.direction, wall.radius, wall.inside,
-                                      material, velocity=wall.velocity, angular_velocity=wall.angular_velocity))
-    return walls

@@ -4,8 +4,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from pdemfem import state_dict as kinds
 
-class PlaneWalls:
+
+class PlaneWalls(kinds.StateComponent):
     """Arrays for all plane walls of a scene; the normal points into the particles' side."""
 
     def __init__(self, wall_configs, material_names: list):
@@ -47,6 +49,23 @@ class PlaneWalls:
             return
         self.candidate_particles, self.candidate_walls = _near_walls(positions, radii, skin, self.points,
                                                                      self.normals)
+
+    # ------------------------------------------------------------ checkpoints
+    _ARRAYS = ("points", "velocities", "forces")
+
+    def state_dict(self) -> dict:
+        state = {name: kinds.global_array(getattr(self, name)) for name in self._ARRAYS}
+        state["work"] = kinds.scalar(float(self.work))
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        for name in self._ARRAYS:
+            stored = np.asarray(state[name])
+            if stored.shape != getattr(self, name).shape:
+                raise kinds.StateMismatch("the scene's plane walls differ from the checkpoint's")
+        for name in self._ARRAYS:
+            getattr(self, name)[...] = state[name]
+        self.work = float(state["work"])
 
     def index(self, name: str) -> int:
         try:

@@ -18,7 +18,7 @@ import pdemfem  # noqa: E402,F401
 from mpi4py import MPI  # noqa: E402
 
 import io_data  # noqa: E402
-from pdemfem.io.checkpoint import checkpoint_path, read_checkpoint, write_checkpoint  # noqa: E402
+from pdemfem.io.checkpoint import FORMAT_VERSION, checkpoint_path, read_checkpoint, write_checkpoint  # noqa: E402
 
 comm = MPI.COMM_WORLD
 SLAB_ROWS = 1001
@@ -75,7 +75,7 @@ elif mode == "read":
     attributes = checkpoint.attributes
     for name, value in attributes_for(step).items():
         assert attributes[name] == value, (name, attributes[name], value)
-    assert attributes["format_version"] == 1
+    assert attributes["format_version"] == FORMAT_VERSION
     for name, value in globals_for(step).items():
         assert np.array_equal(checkpoint.globals[name], value), name
     assert np.array_equal(checkpoint.slabs["u"], slab_for(0, SLAB_ROWS, step))

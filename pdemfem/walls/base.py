@@ -1,0 +1,71 @@
+"""What every contributor wall shares: the totals on the wall, its per-particle history fields,
+its checkpointed state, and the rotation helper of moving walls.
+
+A contributor wall (mesh, cylinder, a solid's contact surface) plugs into the particle
+system (see pdemfem.particles.system) and owns its state: `state_dict()` returns the
+totals and the work (and a subclass adds its kinematics), `load_state_dict()` takes
+them back, `canonicalize()` rebuilds what is derived from them.  The checkpoint code
+only sees the dicts, so a new wall kind needs no change there.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from mpi4py import MPI
+
+from pdemfem import state_dict as kinds
+
+
+def rotation_matrix(rotation_vector) -> np.ndarray:
+    """Rodrigues: the rotation by |phi| about phi / |phi|."""
+    phi = np.asarray(rotation_vector, dtype=float)
+    angle = float(np.linalg.norm(phi))
+    if angle == 0.0:
+        return np.eye(3)
+    k = phi / angle
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
+
+
+class ContributorWall(kinds.StateComponent):
+    """Totals every contributor wall keeps: force and moment on the wall, work done on the particles."""
+
+    def __init__(self, name: str):
+        self.name = name
+        # force (3) and moment about the origin (3) on the wall, this step, summed over ranks after reduce.
+        self.totals = np.zeros(6)
+        self.work = 0.0
+        self._step_work = 0.0
+
+    @property
+    def force(self) -> np.ndarray:
+        """Total contact force the particles exert on the wall (N)."""
+        return self.totals[:3].copy()
+
+    def torque(self, about=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Moment of the particles' contact forces on the wall about the point `about` (N m)."""
+        about = np.asarray(about, dtype=float)
+        return self.totals[3:] - np.cross(about, self.totals[:3])
+
+    def reduce(self, comm) -> None:
+        buffer = np.append(self.totals, self._step_work)
+        comm.Allreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)
+        self.totals[:] = buffer[:6]
+        self.work += buffer[6] - self._step_work
+
+    @staticmethod
+    def _field(state, name: str, tail_shape, dtype, fill):
+        """The wall's per-particle contact history: migrates with the particles and is checkpointed
+        (ParticleState's field registry), never sent to ghosts (only owned particles touch walls)."""
+        if name not in state.fields:
+            state.add_field(name, tail_shape, dtype, fill)
+        return state.fields[name]
+
+    # ------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        return {"work": kinds.scalar(float(self.work)), "totals": kinds.global_array(self.totals)}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.work = float(state["work"])
+        self.totals = np.array(state["totals"], dtype=float)

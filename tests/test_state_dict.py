@@ -1,0 +1,209 @@
+"""Components own their state: the checkpoint only serialises state dicts, the particle field
+registry decides what migrates, what ghosts carry and what is checkpointed."""
+from __future__ import annotations
+
+import sys
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from mpi_harness import run_under_mpi
+from pdemfem import state_dict as kinds
+from pdemfem.errors import CheckpointError
+from pdemfem.io.checkpoint import read_state, write_checkpoint, write_state
+from pdemfem.parallel.decomposition import Decomposition
+from pdemfem.parallel.exchange import GhostExchange
+from pdemfem.particles.state import ParticleState
+
+sys.path.insert(0, str(Path(__file__).parent / "mpi_cases"))
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_new_wall_kind_and_particle_fields_restart_bit_identical(tmp_path, ranks):
+    """A wall kind and per-particle fields unknown to io/checkpoint.py and io/simulation_io.py
+    come back bit-identical from a restart (tests/mpi_cases/state_extension.py)."""
+    completed = run_under_mpi(ranks, "state_extension.py", tmp_path)
+    line = next(line for line in completed.stdout.splitlines() if line.startswith("OK "))
+    _, size, checked, checked_after_restart = line.split()
+    assert int(size) == ranks
+    if ranks > 1:  # the ghost_step field was checked on real ghost rows, before and after the restart
+        assert int(checked) > 0 and int(checked_after_restart) > 0
+
+
+def nested_state(ids, comm) -> dict:
+    rows = len(ids)
+    return {"component": {"ids": kinds.Entry(kinds.PARTICLE_IDS, ids),
+                          "values": kinds.particle_rows(np.column_stack([ids * 0.5, ids + 0.25])),
+                          "clock": kinds.scalar(1.5),
+                          "deep": {"walls": kinds.global_array(np.arange(6.0).reshape(2, 3))}},
+            "solid": {"u": kinds.keyed_slab(np.arange(rows, dtype=float)[::-1, None] * [1.0, 2.0, 3.0],
+                                            ids[::-1]),
+                      "count": kinds.scalar({"a": 3})},
+            "contacts": {"pairs": kinds.Entry(kinds.CONTACT_KEYS, np.column_stack([ids, ids[::-1]])),
+                         "history": kinds.Entry(kinds.CONTACT_ROWS, np.zeros((rows, 0)))}}
+
+
+def test_state_dict_round_trip(tmp_path):
+    ids = np.random.default_rng(1).permutation(50).astype(np.int64)
+    path = write_state(tmp_path / "s.h5", MPI.COMM_SELF, nested_state(ids, MPI.COMM_SELF), attributes={"step": 1})
+    _, state = read_state(path, MPI.COMM_SELF)
+    order = np.argsort(ids)
+    assert np.array_equal(state["component"]["ids"], ids[order])
+    assert np.array_equal(state["component"]["values"], np.column_stack([ids * 0.5, ids + 0.25])[order])
+    assert state["component"]["clock"] == 1.5 and state["solid"]["count"] == {"a": 3}
+    assert np.array_equal(state["component"]["deep"]["walls"], np.arange(6.0).reshape(2, 3))
+    # keyed slab rows come back in global row order
+    assert np.array_equal(state["solid"]["u"], np.arange(50.0)[::-1][np.argsort(ids[::-1])][:, None] * [1, 2, 3])
+    assert state["contacts"]["history"].shape == (50, 0)  # history widths come from the arrays
+
+
+def test_older_format_is_refused_clearly(tmp_path):
+    path = write_checkpoint(tmp_path / "old.h5", MPI.COMM_SELF, {"ids": np.arange(3)},
+                            attributes={"step": 1, "format_version": 1})
+    with pytest.raises(CheckpointError, match="older pdemfem") as error:
+        read_state(path, MPI.COMM_SELF)
+    assert "start the run anew" in error.value.fix
+
+
+def test_a_checkpoint_without_state_manifest_is_refused(tmp_path):
+    path = write_checkpoint(tmp_path / "raw.h5", MPI.COMM_SELF, {"ids": np.arange(3)}, attributes={"step": 1})
+    with pytest.raises(CheckpointError, match="no simulation state"):
+        read_state(path, MPI.COMM_SELF)
+
+
+def particles(count: int, wall_count: int = 1) -> ParticleState:
+    rng = np.random.default_rng(2)
+    return ParticleState(ids=np.arange(count), material_index=np.zeros(count), radii=np.full(count, 0.01),
+                         densities=np.ones(count), positions=rng.random((count, 3)),
+                         velocities=rng.random((count, 3)), angular_velocities=rng.random((count, 3)),
+                         temperatures=np.zeros(count), wall_count=wall_count)
+
+
+def test_field_flags_are_checked():
+    state = particles(4)
+    with pytest.raises(ValueError, match="ghost_rebuild"):
+        state.add_field("a", (3,), ghost_step=True)
+    with pytest.raises(ValueError, match="float64"):
+        state.add_field("b", (), np.int32, ghost_rebuild=True, ghost_step=True)
+    with pytest.raises(ValueError, match="twice"):
+        state.add_field("positions", (3,))
+
+
+def test_particle_state_round_trip_registers_added_fields():
+    state = particles(6)
+    state.add_field("extra", (2,), np.int32, fill=7, ghost_rebuild=True)
+    state.add_field("scratch", (), checkpoint=False)
+    stored = state.state_dict()
+    assert "scratch" not in stored["rows"] and "positions_at_build" not in stored["rows"]
+    assert stored["rows"]["ids"].kind == kinds.PARTICLE_IDS and stored["rows"]["extra"].kind == kinds.PARTICLE_ROWS
+    plain = {"rows": {name: entry.value for name, entry in stored["rows"].items()},
+             "added_fields": stored["added_fields"].value}
+    fresh = particles(6)
+    fresh.load_state_dict(plain)
+    assert fresh.registry["extra"] == state.registry["extra"]
+    assert np.array_equal(fresh.fields["extra"], np.full((6, 2), 7))
+    assert np.array_equal(fresh.positions, state.positions) and fresh.owned_count == 6
+    del plain["rows"]["wall_history"]
+    with pytest.raises(kinds.StateMismatch, match="wall_history"):
+        particles(6).load_state_dict(plain)
+
+
+def periodic_ghosts(count: int = 400):
+    """One rank, periodic in x: the ghosts are this rank's own particles shifted by the period."""
+    state = particles(count)
+    state.add_field("colour", (), ghost_rebuild=True, ghost_step=True)
+    state.fields["colour"][:] = np.arange(count)
+    lengths = np.array([1.0, 0.0, 0.0])
+    decomposition = Decomposition.single(np.array([0.0, -np.inf, -np.inf]), np.array([1.0, np.inf, np.inf]))
+    ghosts = GhostExchange(MPI.COMM_SELF, decomposition, 0.2, lengths)
+    ghosts.plan_and_send(state)
+    return state, ghosts, lengths
+
+
+def test_ghost_update_carries_the_registered_step_fields():
+    state, ghosts, lengths = periodic_ghosts()
+    index_map = ghosts.index_map
+    first, stop = index_map.ghost_ranges[0]
+    assert (first, stop) == (state.owned_count, state.count) and stop > first
+    sources = index_map.send_rows[0]
+    state.velocities[:state.owned_count] += 1.0
+    state.fields["colour"][:state.owned_count] *= 3.0
+    state.radii[:state.owned_count] = 0.02  # ghost_rebuild only: not refreshed between rebuilds
+    ghosts.update(state)
+    assert np.array_equal(state.velocities[first:stop], state.velocities[sources])
+    assert np.array_equal(state.fields["colour"][first:stop], 3.0 * sources)
+    assert np.array_equal(state.positions[first:stop], state.positions[sources] + index_map.send_shifts[0])
+    assert np.all(state.radii[first:stop] == 0.01)
+
+
+def test_ghost_update_allocates_no_arrays():
+    state, ghosts, _ = periodic_ghosts(4000)
+    ghosts.update(state)  # first call: compiles the pack/unpack kernels
+    buffer_bytes = ghosts.step_scatter.send_buffers[0].nbytes
+    tracemalloc.start()
+    ghosts.update(state)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    # Python bookkeeping (dicts, MPI request objects) is a few hundred bytes; a per-step copy of the
+    # ghost rows (what the update did before its buffers were preallocated) is buffer_bytes or more.
+    assert buffer_bytes > 20000 and peak < buffer_bytes / 4, (peak, buffer_bytes)
+
+
+# ------------------------------------------------------------------ guards
+
+
+def test_entry_and_state_dict_shape_are_checked(tmp_path):
+    with pytest.raises(ValueError, match="unknown state entry kind"):
+        kinds.Entry("rows", np.zeros(3))
+    with pytest.raises(TypeError, match="expected an Entry or a dict"):
+        kinds.flatten({"a": {"b": np.zeros(3)}})
+    ids = np.arange(4, dtype=np.int64)
+    two_keys = {"a": {"ids": kinds.Entry(kinds.PARTICLE_IDS, ids)}, "b": {"ids": kinds.Entry(kinds.PARTICLE_IDS, ids)}}
+    with pytest.raises(ValueError, match="more than one particle_ids"):
+        write_state(tmp_path / "a.h5", MPI.COMM_SELF, two_keys)
+    with pytest.raises(ValueError, match="without a particle_ids"):
+        write_state(tmp_path / "b.h5", MPI.COMM_SELF, {"a": {"x": kinds.particle_rows(np.zeros(4))}})
+    with pytest.raises(ValueError, match="two entries"):
+        write_state(tmp_path / "c.h5", MPI.COMM_SELF,
+                    {"a|b": kinds.global_array(ids), "a": {"b": kinds.global_array(ids)}})
+    with pytest.raises(ValueError, match="not contiguous"):
+        write_state(tmp_path / "d.h5", MPI.COMM_SELF, {"u": kinds.keyed_slab(np.zeros(2), [0, 2])})
+
+
+def test_a_triangle_surface_refuses_another_vertex_count():
+    from pdemfem.walls.mesh import TriangleSurface
+
+    square = TriangleSurface("lid", [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], 0)
+    triangle = TriangleSurface("lid", [[0, 0, 0], [1, 0, 0], [1, 1, 0]], [[0, 1, 2]], 0)
+    stored = {name: entry.value for name, entry in triangle.state_dict().items()}
+    with pytest.raises(kinds.StateMismatch, match="3 vertices in the checkpoint, 4 in this scene"):
+        square.load_state_dict(stored)
+
+
+def small_scene(out, walls=()) -> dict:
+    import restart_scenes
+
+    scene = restart_scenes.pile_scene(out, 10, 5, 5, count=8)
+    del scene["solids"], scene["coupling"]
+    scene["walls"] += list(walls)
+    return scene
+
+
+def test_a_restart_names_the_state_the_checkpoint_lacks(tmp_path):
+    from pdemfem.simulation import Simulation
+
+    Simulation.from_dict(small_scene(tmp_path), comm=MPI.COMM_WORLD, base_dir=tmp_path).run(progress=False)
+    path = tmp_path / "checkpoints" / "checkpoint_000000000005.h5"
+    drum = {"name": "drum", "kind": "cylinder", "material": "grain", "radius": 0.2,
+            "axis": {"point": [0.1, 0.1, 0.0], "direction": [0, 0, 1]}}
+    with pytest.raises(CheckpointError, match="lacks the state of wall:drum"):
+        Simulation.from_dict(small_scene(tmp_path / "b", [drum]), comm=MPI.COMM_WORLD, base_dir=tmp_path,
+                             restart=path, force=True)
+    floor = {"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1], "material": "grain"}
+    with pytest.raises(CheckpointError, match="plane walls differ"):
+        Simulation.from_dict(small_scene(tmp_path / "c", [floor]), comm=MPI.COMM_WORLD, base_dir=tmp_path,
+                             restart=path, force=True)
