@@ -154,7 +154,8 @@ def test_plot_reads_history_columns(capsys, workdir):
     assert list(data["kinetic_energy"]) == [0.0, 0.5] and list(data["force_left_wall_z"]) == [0.0, -2.0]
     code, out, _ = run_main(capsys, "plot", folder, "--quiet")
     assert code == 0 and out == ""
-    assert sorted(p.name for p in (folder / "plots").iterdir()) == ["energies.png", "particles.png", "wall_forces.png"]
+    # The particle count is constant (10): no figure for it (tests/test_history_plot.py).
+    assert sorted(p.name for p in (folder / "plots").iterdir()) == ["energies.png", "wall_forces.png"]
 
 
 def test_plot_without_history_is_a_clear_error(capsys, workdir):
