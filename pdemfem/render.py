@@ -262,11 +262,14 @@ def render_output(outdir, scene=None, target=None, title: Optional[str] = None) 
 
 
 def _first_comment(path: Path) -> str:
-    """The first comment line of an example (what it shows)."""
+    """The opening comment of an example (what it shows): its comment lines up to the first command
+    line (indented, "#   pdemfem ...") or the first key."""
+    lines = []
     for line in path.read_text().splitlines():
-        if line.startswith("#"):
-            return line.lstrip("# ").strip()
-    return ""
+        if not line.startswith("#") or line.startswith("#  "):
+            break
+        lines.append(line[1:].strip())
+    return " ".join(lines)
 
 
 def build_gallery(comm, runs_dir, examples=None, say=print) -> List[Path]:
