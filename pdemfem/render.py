@@ -285,10 +285,18 @@ def build_gallery(comm, runs_dir, examples=None, say=print) -> List[Path]:
         say(f"running {path} -> {output}")
         simulation = Simulation.from_file(path, comm=comm, output_dir=output, force=True)
         simulation.run(progress=False)
+        failure = None
         if comm.rank == 0:
-            written.append(render_output(output, scene=path, target=GALLERY_DIR / f"{path.stem}.png",
-                                         title=path.stem))
-            say(f"wrote {written[-1]}")
+            try:
+                written.append(render_output(output, scene=path, target=GALLERY_DIR / f"{path.stem}.png",
+                                             title=path.stem))
+                say(f"wrote {written[-1]}")
+            except PdemfemError as error:
+                failure = (error.where, error.problem, error.fix)
+        # Rank 0 draws while the others wait for the next example: all ranks stop on its error together.
+        failure = comm.bcast(failure, root=0)
+        if failure is not None:
+            raise PdemfemError(*failure)
     if comm.rank == 0 and not examples:
         GALLERY_PAGE.write_text(_gallery_page(paths))
         say(f"wrote {GALLERY_PAGE}")

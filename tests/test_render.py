@@ -40,6 +40,10 @@ def test_render_draws_particles_solids_and_walls(tmp_path):
     assert picture.read_bytes()[:8] == PNG and picture.stat().st_size < LARGEST_PICTURE
     # Without the scene: the particles and every solid series beside them.
     assert render_output(tmp_path / "out", target=tmp_path / "bare.png").read_bytes()[:8] == PNG
+    # The command: `pdemfem render OUTDIR --scene FILE -o PNG`.
+    assert cli.main(["render", str(tmp_path / "out"), "--scene", str(scene_file), "-o", str(tmp_path / "cli.png"),
+                     "--quiet"]) == 0
+    assert (tmp_path / "cli.png").read_bytes()[:8] == PNG
 
 
 def test_render_without_an_output_directory_is_a_clear_error(tmp_path, capsys):
