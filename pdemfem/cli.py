@@ -5,6 +5,8 @@
     pdemfem check scene.yaml [--strict]     (reads and checks everything `run` reads before its first step)
     pdemfem info
     pdemfem plot OUTDIR [--quiet]
+    pdemfem render OUTDIR [--scene scene.yaml] [-o picture.png] [--quiet]   (the run's last output step)
+    pdemfem render --gallery [--runs DIR] [--quiet]     (runs every examples/*.yaml; docs/img/gallery, docs/gallery.md)
 
 Under MPI (``python -m pdemfem.launch -n 2 -- pdemfem run scene.yaml``) every rank
 runs the same command.  Errors:
@@ -96,6 +98,17 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("outdir", help="a run's output directory")
     plot.add_argument("--quiet", action="store_true", help="do not list the files written")
     plot.set_defaults(handler=_command_plot)
+
+    render = commands.add_parser("render", help="draw a run's last output step (particles, solids, walls) into a PNG")
+    render.add_argument("outdir", nargs="?", help="a run's output directory")
+    render.add_argument("--scene", metavar="FILE", help="the run's scene file: its walls are drawn too")
+    render.add_argument("-o", "--output", metavar="PNG", help="the picture (default: OUTDIR/render.png)")
+    render.add_argument("--gallery", action="store_true", help="run every examples/*.yaml and write "
+                        "docs/img/gallery/<example>.png and docs/gallery.md")
+    render.add_argument("--runs", metavar="DIR", default="out/gallery",
+                        help="with --gallery: where the example runs write (default: out/gallery)")
+    render.add_argument("--quiet", action="store_true", help="do not list the files written")
+    render.set_defaults(handler=_command_render)
     return parser
 
 
@@ -530,6 +543,27 @@ def _command_plot(arguments, comm) -> int:
     if written:
         for path in written:
             _say(comm, f"wrote {path}", arguments.quiet)
+    return 0
+
+
+# --------------------------------------------------------------------------- render
+
+
+def _command_render(arguments, comm) -> int:
+    from pdemfem import render
+
+    if arguments.gallery:
+        if arguments.outdir is not None:
+            raise PdemfemError("pdemfem render", "--gallery runs the examples itself; it takes no OUTDIR",
+                               "pdemfem render --gallery, or pdemfem render OUTDIR")
+        render.build_gallery(comm, arguments.runs, say=lambda text: _say(comm, text, arguments.quiet))
+        return 0
+    if arguments.outdir is None:
+        raise PdemfemError("pdemfem render", "no output directory given",
+                           "pdemfem render OUTDIR [--scene scene.yaml], or pdemfem render --gallery")
+    written = _on_root(comm, lambda: str(render.render_output(arguments.outdir, scene=arguments.scene,
+                                                               target=arguments.output)))
+    _say(comm, f"wrote {written}", arguments.quiet)
     return 0
 
 

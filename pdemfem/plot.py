@@ -1,9 +1,14 @@
 """Plots of a run's history.csv (matplotlib, Agg backend: no display needed).
 
-    plot_history("out/demo")  ->  out/demo/plots/energies.png, wall_forces.png, particles.png
+    plot_history("out/demo")  ->  out/demo/plots/energies.png, wall_forces.png, particles.png,
+                                  reactions.png, deflections.png (those with data)
 
-Columns used (missing ones are skipped): ``time``; every ``*_energy`` column;
-``force_<wall>_x/_y/_z`` per wall; ``particles`` and ``contacts``.
+Columns used (missing ones are skipped): ``time``; every ``*_energy`` column and ``wall_work``;
+``mean_force_<wall>_x/_y/_z`` per wall and contact solid (the mean over each output interval;
+``force_<wall>_*``, the value at the output time, when a history has no means);
+``reaction_<solid>_<group>_x/_y/_z``; ``max_displacement_<solid>``; ``particles`` and ``contacts``.
+A quantity that stays constant over the whole run gets no curve (its value is named in the
+title instead), and a figure all of whose quantities are constant is not drawn.
 """
 from __future__ import annotations
 
@@ -20,6 +25,9 @@ from pdemfem.errors import PdemfemError
 __all__ = ["read_history", "plot_history"]
 
 _WALL_FORCE = re.compile(r"^force_(.+)_([xyz])$")
+_MEAN_FORCE = re.compile(r"^mean_force_(.+)_([xyz])$")
+_REACTION = re.compile(r"^reaction_(.+)_([xyz])$")
+_DEFLECTION = re.compile(r"^max_displacement_(.+)$")
 
 
 def read_history(path) -> Dict[str, np.ndarray]:
@@ -55,6 +63,34 @@ def read_history(path) -> Dict[str, np.ndarray]:
     return columns
 
 
+def is_constant(values: np.ndarray) -> bool:
+    """Does a column hold one value over the whole run (to round-off of that value)?"""
+    if len(values) < 2:
+        return True
+    spread = float(values.max() - values.min())
+    # 1e-12 of the magnitude: a sum recomputed each row may differ in its last bits without changing.
+    return spread <= 1e-12 * max(float(np.abs(values).max()), np.finfo(float).tiny)
+
+
+def _vector_columns(data, pattern) -> Dict[str, Dict[str, str]]:
+    """{name: {component: column}} of the columns matching `pattern` (groups: name, component)."""
+    found: Dict[str, Dict[str, str]] = {}
+    for column in data:
+        match = pattern.match(column)
+        if match:
+            found.setdefault(match.group(1), {})[match.group(2)] = column
+    return found
+
+
+def _constant_note(data, columns, unit: str) -> str:
+    constants = [column for column in columns if is_constant(data[column])]
+    if not constants:
+        return ""
+    shown = ", ".join(f"{column} = {data[column][0]:.4g}{unit}" for column in constants[:3])
+    more = f" and {len(constants) - 3} more" if len(constants) > 3 else ""
+    return f"constant: {shown}{more}"
+
+
 def plot_history(outdir) -> List[Path]:
     """Draw OUTDIR/history.csv into OUTDIR/plots/*.png; returns the files written."""
     outdir = Path(outdir)
@@ -82,49 +118,86 @@ def plot_history(outdir) -> List[Path]:
         pyplot.close(figure)
         written.append(target)
 
-    energies = [name for name in data if name.endswith("_energy")]
-    if energies:
+    def titled(axes, title, note):
+        axes.set_title(title + (f"\n({note})" if note else ""), fontsize="medium")
+
+    energies = [name for name in data if name.endswith("_energy") or name in ("wall_work", "solid_load_potential")]
+    varying = [name for name in energies if not is_constant(data[name])]
+    if varying:
         figure, axes = pyplot.subplots(figsize=(7, 4.5))
-        for name in energies:
+        for name in varying:
             axes.plot(time, data[name], label=name.replace("_", " "))
         if len(energies) > 1:
-            axes.plot(time, sum(data[name] for name in energies), "k--", label="sum of the above")
+            # The bookkeeping total (pdemfem.monitor.total_energy): wall work is fed in, not held.
+            total = sum(data[name] for name in energies if name != "wall_work") - data.get("wall_work", 0.0)
+            axes.plot(time, total, "k--", label="total (conserved up to integration error)")
         axes.set_xlabel("time [s]")
         axes.set_ylabel("energy [J]")
-        axes.set_title("energies")
+        titled(axes, "energies", _constant_note(data, energies, " J"))
         axes.legend(fontsize="small")
         axes.grid(alpha=0.3)
         save(figure, "energies.png")
 
-    walls: Dict[str, Dict[str, str]] = {}
-    for name in data:
-        match = _WALL_FORCE.match(name)
-        if match:
-            walls.setdefault(match.group(1), {})[match.group(2)] = name
-    if walls:
-        figure, axes = pyplot.subplots(3, 1, figsize=(7, 7), sharex=True)
-        for component, axis in zip("xyz", axes):
-            for wall, names in walls.items():
-                if component in names:
-                    axis.plot(time, data[names[component]], label=wall)
-            axis.set_ylabel(f"F_{component} [N]")
-            axis.grid(alpha=0.3)
-        axes[0].set_title("contact force on each wall")
-        axes[0].legend(fontsize="small", ncol=max(1, math.ceil(len(walls) / 4)))
-        axes[-1].set_xlabel("time [s]")
-        save(figure, "wall_forces.png")
+    means = _vector_columns(data, _MEAN_FORCE)
+    walls = means or _vector_columns(data, _WALL_FORCE)
+    how = "mean over each output interval" if means else "at the output times"
+    _vector_figure(pyplot, save, time, data, walls, f"contact force on each wall and solid ({how})", "F", "N",
+                   "wall_forces.png")
+    _vector_figure(pyplot, save, time, data, _vector_columns(data, _REACTION),
+                   "support reactions of the solids (solid_group)", "R", "N", "reactions.png")
 
-    if "particles" in data:
+    deflections = {match.group(1): column for column in data if (match := _DEFLECTION.match(column))}
+    if any(not is_constant(data[column]) for column in deflections.values()):
         figure, axes = pyplot.subplots(figsize=(7, 4))
-        axes.plot(time, data["particles"], label="particles")
+        for solid, column in deflections.items():
+            if not is_constant(data[column]):
+                axes.plot(time, 1e3 * data[column], label=solid)
         axes.set_xlabel("time [s]")
-        axes.set_ylabel("particles")
-        if "contacts" in data:
-            twin = axes.twinx()
-            twin.plot(time, data["contacts"], color="tab:orange", label="contacts")
-            twin.set_ylabel("contacts")
-            axes.legend(handles=axes.get_lines() + twin.get_lines(), fontsize="small")
-        axes.set_title("particle and contact count")
+        axes.set_ylabel("largest displacement [mm]")
+        titled(axes, "deflection of each solid (largest nodal displacement)",
+               _constant_note(data, list(deflections.values()), " m"))
+        axes.legend(fontsize="small")
+        axes.grid(alpha=0.3)
+        save(figure, "deflections.png")
+
+    counts = [name for name in ("particles", "contacts") if name in data]
+    varying = [name for name in counts if not is_constant(data[name])]
+    if varying:
+        figure, axes = pyplot.subplots(figsize=(7, 4))
+        colors = {"particles": "tab:blue", "contacts": "tab:orange"}
+        for name in varying:
+            axes.plot(time, data[name], color=colors[name], label=name)
+        axes.set_xlabel("time [s]")
+        axes.set_ylabel("count")
+        titled(axes, "particle and contact count", _constant_note(data, counts, ""))
+        axes.legend(fontsize="small")
         axes.grid(alpha=0.3)
         save(figure, "particles.png")
     return written
+
+
+def _vector_figure(pyplot, save, time, data, vectors, title, symbol, unit, name) -> None:
+    """One row per component that varies for some entry; entries constant in every component are named."""
+    rows = [component for component in "xyz"
+            if any(component in columns and not is_constant(data[columns[component]]) for columns in vectors.values())]
+    if not rows:
+        return
+    figure, axes = pyplot.subplots(len(rows), 1, figsize=(7, 2.4 * len(rows) + 0.8), sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    constant_entries = []
+    for entry, columns in vectors.items():
+        if all(is_constant(data[column]) for column in columns.values()):
+            constant_entries.append(entry)
+            continue
+        for component, axis in zip(rows, axes):
+            if component in columns:
+                axis.plot(time, data[columns[component]], label=entry)
+    for component, axis in zip(rows, axes):
+        axis.set_ylabel(f"{symbol}_{component} [{unit}]")
+        axis.grid(alpha=0.3)
+    note = f"constant, not drawn: {', '.join(constant_entries)}" if constant_entries else ""
+    axes[0].set_title(title + (f"\n({note})" if note else ""), fontsize="medium")
+    shown = len(vectors) - len(constant_entries)
+    axes[0].legend(fontsize="small", ncol=max(1, math.ceil(shown / 4)))
+    axes[-1].set_xlabel("time [s]")
+    save(figure, name)

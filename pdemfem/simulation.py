@@ -20,6 +20,7 @@ from pdemfem.coupling.check import coupling_assessment
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
 from pdemfem.errors import SceneError, SolverError
+from pdemfem.io.history import IntervalMean
 from pdemfem.io.simulation_io import SimulationIO
 from pdemfem.monitor import DivergenceMonitor
 from pdemfem.parallel.api_safety import collective_errors, private_communicators
@@ -67,6 +68,10 @@ class Simulation:
                                        comm=self.comm)
         self.io = SimulationIO(self, force=force)
         self.stopped_by = None  # the signal's name when a run stopped early (SIGTERM/SIGUSR1)
+        # Contact forces on walls and solids summed over the steps since the last history row: the
+        # rows report their mean over the output interval (an instantaneous sample of a granular
+        # contact force is mostly the noise of single impacts).
+        self.surface_force_means = IntervalMean()
         self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
         if restart is not None:
             self.io.restore(restart, force=force)
@@ -178,6 +183,7 @@ class Simulation:
             system.step()
             if self.solids:
                 self.coupling.after_particle_step()
+            self.surface_force_means.add([self.wall_force(name) for name in self._surface_names()])
             self.step_count += 1
             self.time = self.step_count * self.dt
             if system.largest_displacement > self.runaway_displacement:
@@ -271,6 +277,11 @@ class Simulation:
             columns += ["solid_kinetic_energy", "solid_strain_energy", "solid_load_potential"]
         for name in self._surface_names():
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
+        for name in self._surface_names():
+            columns += [f"mean_force_{name}_x", f"mean_force_{name}_y", f"mean_force_{name}_z"]
+        for solid, group in self._support_groups():
+            columns += [f"reaction_{solid}_{group}_x", f"reaction_{solid}_{group}_y", f"reaction_{solid}_{group}_z"]
+        columns += [f"max_displacement_{name}" for name in self.solids]
         return columns
 
     def history_row(self) -> dict:
@@ -279,11 +290,28 @@ class Simulation:
                "lost_particles": system.lost_particles,
                "contacts": system.contact_count}
         row.update(self.energies())
-        for name in self._surface_names():
-            force = self.wall_force(name)
+        names = self._surface_names()
+        instantaneous = [self.wall_force(name) for name in names]
+        # Before the first step of a run (or of a restart) no step has been averaged: the forces now.
+        means = self.surface_force_means.take(fallback=instantaneous)
+        for name, force, mean in zip(names, instantaneous, means):
             for axis, label in enumerate("xyz"):
                 row[f"force_{name}_{label}"] = force[axis]
+                row[f"mean_force_{name}_{label}"] = mean[axis]
+        for solid, group in self._support_groups():
+            reaction = self.solid_reaction(solid, group)
+            for axis, label in enumerate("xyz"):
+                row[f"reaction_{solid}_{group}_{label}"] = reaction[axis]
+        for name, solid in self.solids.items():
+            displacements = solid.displacements
+            local = float(np.sqrt((displacements ** 2).sum(axis=1)).max()) if len(displacements) else 0.0
+            row[f"max_displacement_{name}"] = self.comm.allreduce(local, op=MPI.MAX)
         return row
+
+    def _support_groups(self) -> list:
+        """(solid, group) of every fixed or prescribed group: each gets reaction_<solid>_<group>_x/y/z columns."""
+        return [(config.name, group) for config in self.scene.solids
+                for group in [*config.fixed, *(entry.group for entry in config.prescribed)]]
 
     def _surface_names(self) -> list:
         """Walls, then the solids the particles can touch: each gets force_<name>_x/y/z columns."""

@@ -154,7 +154,8 @@ def test_plot_reads_history_columns(capsys, workdir):
     assert list(data["kinetic_energy"]) == [0.0, 0.5] and list(data["force_left_wall_z"]) == [0.0, -2.0]
     code, out, _ = run_main(capsys, "plot", folder, "--quiet")
     assert code == 0 and out == ""
-    assert sorted(p.name for p in (folder / "plots").iterdir()) == ["energies.png", "particles.png", "wall_forces.png"]
+    # The particle count is constant (10): no figure for it (tests/test_history_plot.py).
+    assert sorted(p.name for p in (folder / "plots").iterdir()) == ["energies.png", "wall_forces.png"]
 
 
 def test_plot_without_history_is_a_clear_error(capsys, workdir):
@@ -279,3 +280,37 @@ def test_check_counts_the_steps_run_takes(tmp_path):
         """))
     lines, _ = check_report(str(path))
     assert "steps: 3 to time.end = 0.0025 s" in lines
+
+
+def _run_on_a_terminal(arguments, cwd) -> tuple:
+    """(exit code, everything printed) of `pdemfem ...` on 2 ranks whose output is a terminal (a pty),
+    where colouring libraries and progress bars decide to draw."""
+    import pty
+
+    command = mpiexec_command(2, [sys.executable, "-m", "pdemfem.cli", *map(str, arguments)])
+    leader, follower = pty.openpty()
+    process = subprocess.Popen(command, stdout=follower, stderr=follower, stdin=subprocess.DEVNULL,
+                               env=process_environment(), cwd=cwd)
+    os.close(follower)
+    printed = b""
+    while True:
+        try:
+            chunk = os.read(leader, 4096)
+        except OSError:  # the terminal closes when the last process holding it exits
+            break
+        if not chunk:
+            break
+        printed += chunk
+    os.close(leader)
+    return process.wait(timeout=300), printed
+
+
+@pytest.mark.mpi
+def test_quiet_run_under_mpi_on_a_terminal_prints_nothing_and_no_escape_codes(workdir):
+    scene = ROOT / "examples" / "collision.yaml"
+    code, printed = _run_on_a_terminal(["run", scene, "-o", workdir / "quiet", "--quiet"], workdir)
+    assert code == 0, printed
+    assert printed == b""  # --quiet: no summary, no progress bar, no escape or carriage-return codes
+    code, printed = _run_on_a_terminal(["run", scene, "-o", workdir / "loud"], workdir)
+    assert code == 0 and b"results: " in printed, printed
+    assert b"\x1b" not in printed  # the progress bar redraws with \r only: no ANSI escape sequences

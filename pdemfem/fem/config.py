@@ -22,8 +22,8 @@ CellCount = Annotated[int, Field(gt=0)]
 class BoxMeshConfig(StrictModel):
     """A box [[x0,y0,z0],[x1,y1,z1]] split into nx*ny*nz hexahedra of 6 tetrahedra each (gmsh)."""
 
-    box: Box
-    cells: Tuple[CellCount, CellCount, CellCount]
+    box: Box = Field(description="[[x0,y0,z0],[x1,y1,z1]] [m]")
+    cells: Tuple[CellCount, CellCount, CellCount] = Field(description="hexahedra along x, y and z (6 tetrahedra each)")
 
 
 class DampingConfig(StrictModel):
@@ -36,9 +36,10 @@ class DampingConfig(StrictModel):
 class PrescribedConfig(StrictModel):
     """Prescribed motion of a group: constant velocity or constant displacement (null = free component)."""
 
-    group: str
-    velocity: Optional[PartialVector3] = None
-    displacement: Optional[PartialVector3] = None
+    group: str = Field(description="a physical group of the mesh, or a box face xmin..zmax")
+    velocity: Optional[PartialVector3] = Field(None, description="constant velocity [m/s]; null components are free")
+    displacement: Optional[PartialVector3] = Field(
+        None, description="constant displacement [m]; null components are free")
 
     @model_validator(mode="after")
     def _one_kind(self):
@@ -53,31 +54,32 @@ class PrescribedConfig(StrictModel):
 class TractionConfig(StrictModel):
     """A uniform surface traction (force per area, global axes) [Pa] on a boundary group."""
 
-    group: str
-    traction: Vector3
+    group: str = Field(description="a boundary group of the mesh, or a box face xmin..zmax")
+    traction: Vector3 = Field(description="force per area in global axes [Pa]")
 
 
 class PointForceConfig(StrictModel):
     """A constant force [N] on the mesh node nearest to `point`."""
 
-    point: Vector3
-    force: Vector3
+    point: Vector3 = Field(description="the force acts on the mesh node nearest to this point [m]")
+    force: Vector3 = Field(description="constant force [N]")
 
 
 class SolidConfig(StrictModel):
-    name: str
+    name: str = Field(description="unique solid name (shares one namespace with the walls)")
     mesh: Union[str, BoxMeshConfig] = Field(
         description="gmsh .msh (any meshio-readable tetrahedral mesh), relative to the scene file, or a generated box"
     )
-    material: str
-    element: Literal["P1", "P2"] = "P1"
-    mass: Literal["lumped", "consistent"] = "lumped"
-    damping: DampingConfig = Field(default_factory=DampingConfig)
+    material: str = Field(description="a name under materials")
+    element: Literal["P1", "P2"] = Field("P1", description="linear (P1) or quadratic (P2) tetrahedra")
+    mass: Literal["lumped", "consistent"] = Field(
+        "lumped", description="lumped: diagonal mass, no solve per step; consistent: a mass solve per step")
+    damping: DampingConfig = Field(default_factory=DampingConfig, description="Rayleigh damping")
     fixed: List[str] = Field(default_factory=list, description="groups (or box faces xmin..zmax) clamped in x, y and z")
-    prescribed: List[PrescribedConfig] = Field(default_factory=list)
+    prescribed: List[PrescribedConfig] = Field(default_factory=list, description="groups with prescribed motion")
     contact: List[str] = Field(default_factory=list, description="surface groups that particles may touch")
-    tractions: List[TractionConfig] = Field(default_factory=list)
-    point_forces: List[PointForceConfig] = Field(default_factory=list)
+    tractions: List[TractionConfig] = Field(default_factory=list, description="constant surface tractions")
+    point_forces: List[PointForceConfig] = Field(default_factory=list, description="constant nodal forces")
     initial_temperature: Optional[PositiveFloat] = Field(
         None, description="uniform initial temperature [K]; default: the reference temperature (no thermal load)"
     )

@@ -8,6 +8,8 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import numpy as np
+
 
 class HistoryWriter:
     def __init__(self, path: Path, columns: list, is_writer: bool, append: bool = False):
@@ -34,3 +36,30 @@ class HistoryWriter:
         if self._file is not None:
             self._file.close()
             self._file = None
+
+
+class IntervalMean:
+    """The mean of a quantity over the steps since it was last taken (a history row's output interval).
+
+    `add` once per step; `take` returns the mean and starts the next interval.  Taken again with no
+    step in between (two rows at one step), it repeats the last mean; before any step it returns
+    `fallback` (the value now)."""
+
+    def __init__(self):
+        self._sum = None
+        self._steps = 0
+        self._last = None
+
+    def add(self, values) -> None:
+        values = np.asarray(values, dtype=float)
+        if self._sum is None:
+            self._sum = np.zeros_like(values)
+        self._sum += values
+        self._steps += 1
+
+    def take(self, fallback):
+        if self._steps:
+            self._last = self._sum / self._steps
+            self._sum[...] = 0.0
+            self._steps = 0
+        return self._last if self._last is not None else np.asarray(fallback, dtype=float)

@@ -32,12 +32,16 @@ class TimeConfig(StrictModel):
 
 
 class MaterialConfig(StrictModel):
-    density: PositiveFloat
-    youngs_modulus: PositiveFloat
-    poisson_ratio: Annotated[float, Field(gt=-1.0, lt=0.5)]
-    thermal_expansion: NonNegativeFloat = 0.0
-    conductivity: Optional[PositiveFloat] = None
-    heat_capacity: Optional[PositiveFloat] = None
+    density: PositiveFloat = Field(description="mass density [kg/m^3] (particle mass = 4/3 pi r^3 density)")
+    youngs_modulus: PositiveFloat = Field(
+        description="Young's modulus E [Pa]; the time step scales as 1/sqrt(E)")
+    poisson_ratio: Annotated[float, Field(gt=-1.0, lt=0.5)] = Field(description="Poisson's ratio nu (dimensionless)")
+    thermal_expansion: NonNegativeFloat = Field(
+        0.0, description="linear thermal expansion coefficient [1/K] (solids; unused by particles)")
+    conductivity: Optional[PositiveFloat] = Field(
+        None, description="thermal conductivity [W/(m K)]; read, not used yet (no heat transfer is modelled)")
+    heat_capacity: Optional[PositiveFloat] = Field(
+        None, description="specific heat [J/(kg K)]; read, not used yet (no heat transfer is modelled)")
 
 
 class InteractionConfig(StrictModel):
@@ -78,8 +82,8 @@ class InteractionConfig(StrictModel):
 
 
 class RadiusRange(StrictModel):
-    min: PositiveFloat
-    max: PositiveFloat
+    min: PositiveFloat = Field(description="smallest radius [m]")
+    max: PositiveFloat = Field(description="largest radius [m] (radii are uniformly distributed between the two)")
 
     @model_validator(mode="after")
     def _ordered(self):
@@ -89,24 +93,32 @@ class RadiusRange(StrictModel):
 
 
 class BoxRegion(StrictModel):
-    box: Box
+    box: Box = Field(description="[[x0,y0,z0],[x1,y1,z1]] [m]: particle centres lie at least a radius inside it")
 
 
 class InsertConfig(StrictModel):
-    kind: Literal["list", "lattice", "random"]
-    region: Optional[BoxRegion] = None
-    count: Optional[Annotated[int, Field(gt=0)]] = None
-    seed: int = 0
+    kind: Literal["list", "lattice", "random"] = Field(
+        description="list: explicit positions; lattice: simple cubic in a box; random: random sequential addition "
+                    "(no initial overlap)")
+    region: Optional[BoxRegion] = Field(None, description="lattice, random: the box the particles are placed in")
+    count: Optional[Annotated[int, Field(gt=0)]] = Field(None, description="lattice, random: number of particles")
+    seed: int = Field(0, description="random seed for radii, jitter and random positions (runs are reproducible)")
     # kind: list
-    positions: Optional[List[Vector3]] = None
-    velocities: Optional[List[Vector3]] = None
-    angular_velocities: Optional[List[Vector3]] = None
-    radii: Optional[List[PositiveFloat]] = None
+    positions: Optional[List[Vector3]] = Field(None, description="list: particle centres [m]")
+    velocities: Optional[List[Vector3]] = Field(
+        None, description="list: one initial velocity per position [m/s]; default: velocity")
+    angular_velocities: Optional[List[Vector3]] = Field(
+        None, description="list: one initial angular velocity per position [rad/s]; default zero")
+    radii: Optional[List[PositiveFloat]] = Field(
+        None, description="list: one radius per position [m], overriding the group's radius")
     # kind: lattice / random
-    velocity: Vector3 = (0.0, 0.0, 0.0)
-    spacing: Optional[PositiveFloat] = Field(None, description="lattice spacing; default largest diameter * 1.05")
-    jitter: Annotated[float, Field(ge=0, le=1)] = Field(0.0, description="random offset as a fraction of the lattice gap")
-    max_attempts: Annotated[int, Field(gt=0)] = 1000
+    velocity: Vector3 = Field((0.0, 0.0, 0.0), description="initial velocity of every particle [m/s]")
+    spacing: Optional[PositiveFloat] = Field(
+        None, description="lattice: site spacing [m]; default largest diameter * 1.05")
+    jitter: Annotated[float, Field(ge=0, le=1)] = Field(
+        0.0, description="lattice: random offset of each site as a fraction of the gap spacing - largest diameter")
+    max_attempts: Annotated[int, Field(gt=0)] = Field(
+        1000, description="random: tries per particle before the insertion gives up")
 
     @model_validator(mode="after")
     def _complete(self):
@@ -126,11 +138,13 @@ class InsertConfig(StrictModel):
 
 
 class ParticleGroupConfig(StrictModel):
-    name: str
-    material: str
-    radius: Union[PositiveFloat, RadiusRange]
-    insert: InsertConfig
-    initial_temperature: Optional[PositiveFloat] = None
+    name: str = Field(description="unique group name")
+    material: str = Field(description="a name under materials")
+    radius: Union[PositiveFloat, RadiusRange] = Field(
+        description="one radius [m], or {min, max} for radii uniformly distributed between the two")
+    insert: InsertConfig = Field(description="how the particles are placed at the start")
+    initial_temperature: Optional[PositiveFloat] = Field(
+        None, description="starting temperature [K], carried and written (output temperature); no heat transfer is modelled")
 
 
 class CylinderAxis(StrictModel):
@@ -156,13 +170,14 @@ WALL_KIND_KEYS = {
 class WallConfig(StrictModel):
     """One wall: kind plane (analytic), mesh (triangle surface from a file) or cylinder (analytic)."""
 
-    name: str
-    kind: Literal["plane", "mesh", "cylinder"]
-    material: str
-    point: Vector3 = (0.0, 0.0, 0.0)
-    normal: Vector3 = (0.0, 0.0, 1.0)
+    name: str = Field(description="unique wall name (history.csv columns force_<name>_x/_y/_z, wall_force(name))")
+    kind: Literal["plane", "mesh", "cylinder"] = Field(
+        description="plane: infinite analytic plane; mesh: triangle surface from a file; cylinder: analytic")
+    material: str = Field(description="a name under materials (the contact uses the pair's interaction)")
+    point: Vector3 = Field((0.0, 0.0, 0.0), description="a point on the plane [m]")
+    normal: Vector3 = Field((0.0, 0.0, 1.0), description="plane normal pointing to the particles' side (any length)")
     velocity: Vector3 = Field((0.0, 0.0, 0.0), description="prescribed wall velocity [m/s]")
-    temperature: Optional[PositiveFloat] = None
+    temperature: Optional[PositiveFloat] = Field(None, description="wall temperature [K]; read, not used yet")
     # kind: mesh
     file: Optional[str] = Field(None, description="surface mesh (STL, gmsh .msh, or any meshio format), relative to the scene")
     scale: PositiveFloat = Field(1.0, description="factor applied to the file's coordinates (e.g. 0.001 for mm)")
@@ -212,7 +227,7 @@ DirectoryName = Annotated[str, Field(min_length=1)]
 
 
 class OutputConfig(StrictModel):
-    dir: DirectoryName = "out"
+    dir: DirectoryName = Field("out", description="output directory, relative to the scene file (run -o overrides)")
     every: Optional[PositiveFloat] = Field(None, description="output interval [s]; default end/100")
     particles: List[ParticleOutputField] = Field(
         default_factory=lambda: ["positions", "velocities", "radii", "ids", "forces", "temperature"],
@@ -237,7 +252,7 @@ class NeighborConfig(StrictModel):
 
 class DomainConfig(StrictModel):
     box: Optional[Box] = Field(
-        None, description="simulation domain [[xmin,ymin,zmin],[xmax,ymax,zmax]]; particles leaving it are removed "
+        None, description="simulation domain [[xmin,ymin,zmin],[xmax,ymax,zmax]] [m]; particles leaving it are removed "
                           "and counted (lost_particles); needed for periodic axes")
     periodic: List[Literal["x", "y", "z"]] = Field(default_factory=list, description="periodic axes, e.g. [x]")
 
@@ -272,19 +287,22 @@ class CouplingConfig(StrictModel):
 
 
 class Scene(StrictModel):
-    time: TimeConfig
-    gravity: Vector3 = (0.0, 0.0, -9.81)
-    materials: Dict[str, MaterialConfig]
-    interactions: Dict[str, InteractionConfig] = Field(default_factory=lambda: {"default": InteractionConfig()})
-    particles: List[ParticleGroupConfig] = Field(default_factory=list)
-    walls: List[WallConfig] = Field(default_factory=list)
-    output: OutputConfig = Field(default_factory=OutputConfig)
-    checkpoint: CheckpointConfig = Field(default_factory=CheckpointConfig)
-    neighbors: NeighborConfig = Field(default_factory=NeighborConfig)
-    domain: DomainConfig = Field(default_factory=DomainConfig)
-    parallel: ParallelConfig = Field(default_factory=ParallelConfig)
-    solids: List[SolidConfig] = Field(default_factory=list)
-    coupling: CouplingConfig = Field(default_factory=CouplingConfig)
+    time: TimeConfig = Field(description="end time and time step")
+    gravity: Vector3 = Field((0.0, 0.0, -9.81), description="gravitational acceleration [m/s^2]")
+    materials: Dict[str, MaterialConfig] = Field(description="material name -> properties")
+    interactions: Dict[str, InteractionConfig] = Field(
+        default_factory=lambda: {"default": InteractionConfig()},
+        description="contact laws: 'default' for every pair, 'a-b' for the pair of materials a and b")
+    particles: List[ParticleGroupConfig] = Field(
+        default_factory=list, description="particle groups, inserted in list order (ids follow that order)")
+    walls: List[WallConfig] = Field(default_factory=list, description="rigid walls: plane, mesh, cylinder")
+    output: OutputConfig = Field(default_factory=OutputConfig, description="history.csv and the XDMF series")
+    checkpoint: CheckpointConfig = Field(default_factory=CheckpointConfig, description="restart files")
+    neighbors: NeighborConfig = Field(default_factory=NeighborConfig, description="the Verlet neighbour list")
+    domain: DomainConfig = Field(default_factory=DomainConfig, description="bounding box and periodic axes")
+    parallel: ParallelConfig = Field(default_factory=ParallelConfig, description="load balance across ranks")
+    solids: List[SolidConfig] = Field(default_factory=list, description="deformable FE solids (PETSc)")
+    coupling: CouplingConfig = Field(default_factory=CouplingConfig, description="the DEM-FEM coupled step")
 
     @model_validator(mode="after")
     def _references(self):

@@ -1,0 +1,120 @@
+"""history.csv's interval-mean contact forces, solid reactions and deflections, and `pdemfem plot`."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from pdemfem import Simulation
+from pdemfem.io.history import IntervalMean
+from pdemfem.plot import is_constant, plot_history, read_history
+
+STEPS_PER_ROW = 5
+
+GRAINS = {
+    "time": {"end": 1.0, "dt": 2.0e-5},  # end is set per test from the step count
+    "gravity": [0, 0, -9.81],
+    "materials": {"glass": {"density": 2500, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3}},
+    "interactions": {"default": {"restitution": 0.5, "friction": 0.5}},
+    "particles": [{"name": "grains", "material": "glass", "radius": 0.001,
+                   "insert": {"kind": "lattice", "region": {"box": [[0, 0, 0.00002], [0.0065, 0.0065, 0.0045]]},
+                              "count": 18, "velocity": [0, 0, -0.3], "seed": 1}}],
+    "walls": [{"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1], "material": "glass"}],
+    "output": {"particles": [], "solids": []},
+}
+
+
+def grains_scene(steps: int) -> dict:
+    scene = copy.deepcopy(GRAINS)
+    dt = scene["time"]["dt"]
+    scene["time"]["end"] = steps * dt
+    scene["output"]["every"] = STEPS_PER_ROW * dt
+    return scene
+
+
+def test_interval_mean_repeats_and_falls_back():
+    mean = IntervalMean()
+    assert list(mean.take(fallback=[7.0])) == [7.0]  # no step yet: the value now
+    mean.add([1.0])
+    mean.add([4.0])
+    assert list(mean.take(fallback=[7.0])) == [2.5]
+    assert list(mean.take(fallback=[7.0])) == [2.5]  # a second row at the same step repeats the mean
+
+
+def test_history_forces_are_means_over_the_output_interval(tmp_path):
+    steps = 4 * STEPS_PER_ROW
+    run = Simulation.from_dict(grains_scene(steps), base_dir=tmp_path, output_dir=tmp_path / "run")
+    run.run(progress=False)
+    history = read_history(tmp_path / "run" / "history.csv")
+    assert list(history["step"]) == list(range(0, steps + 1, STEPS_PER_ROW))
+
+    # The same scene stepped one step at a time, sampling the floor force after every step.
+    stepped = Simulation.from_dict(grains_scene(steps), base_dir=tmp_path, output_dir=tmp_path / "stepped")
+    samples = []
+    for _ in range(steps):
+        stepped.step(1)
+        samples.append(stepped.wall_force("floor")[2])
+    expected = np.mean(np.reshape(samples, (-1, STEPS_PER_ROW)), axis=1)
+    # Same steps, same order of summation: equal to the last bit up to the one division (1 ulp).
+    np.testing.assert_allclose(history["mean_force_floor_z"][1:], expected, rtol=4 * np.finfo(float).eps, atol=0)
+    # The instantaneous column is the last sample of each interval; the grains land in this window,
+    # so the impacts make the two differ (what the mean is for).
+    np.testing.assert_array_equal(history["force_floor_z"][1:], np.asarray(samples)[STEPS_PER_ROW - 1::STEPS_PER_ROW])
+    assert np.any(history["mean_force_floor_z"][1:] != history["force_floor_z"][1:])
+
+
+PLATE = {
+    "time": {"end": 1.0, "dt": 1.0e-6},
+    "gravity": [0, 0, -9.81],
+    "materials": {"glass": {"density": 2500, "youngs_modulus": 1.0e7, "poisson_ratio": 0.3},
+                  "alu": {"density": 2700, "youngs_modulus": 7.0e10, "poisson_ratio": 0.33}},
+    "particles": [{"name": "ball", "material": "glass", "radius": 0.002,
+                   "insert": {"kind": "list", "positions": [[0.05, 0.01, 0.02]]}}],
+    "solids": [{"name": "plate", "mesh": {"box": [[0, 0, 0], [0.1, 0.02, 0.01]], "cells": [4, 1, 1]},
+                "material": "alu", "fixed": ["xmin", "xmax"], "contact": ["zmax"]}],
+    "output": {"every": 5.0e-6, "particles": [], "solids": []},
+}
+
+
+def test_history_holds_support_reactions_and_deflection(tmp_path):
+    scene = copy.deepcopy(PLATE)
+    scene["time"]["end"] = 10 * scene["time"]["dt"]
+    simulation = Simulation.from_dict(scene, base_dir=tmp_path, output_dir=tmp_path / "out")
+    simulation.run(progress=False)
+    history = read_history(tmp_path / "out" / "history.csv")
+    weight = 2700 * 0.1 * 0.02 * 0.01 * 9.81
+    supports = history["reaction_plate_xmin_z"] + history["reaction_plate_xmax_z"]
+    # Row 0 follows the static solve (true residual below 1e-10 of the load): the supports carry the
+    # plate's weight; 1e-8 leaves room for that residual summed over the support nodes.
+    assert supports[0] == pytest.approx(weight, rel=1e-8)
+    # Symmetric plate and load: the two supports share the weight (same residual bound).
+    assert history["reaction_plate_xmin_z"][0] == pytest.approx(weight / 2, rel=1e-8)
+    final = np.sqrt((simulation.solids["plate"].displacements ** 2).sum(axis=1)).max()
+    assert history["max_displacement_plate"][-1] == final > 0.0
+
+
+def write_history(folder, text):
+    folder.mkdir()
+    (folder / "history.csv").write_text(text)
+    return folder
+
+
+def test_plot_draws_means_reactions_and_deflections_and_skips_constants(tmp_path):
+    header = ("time,step,particles,contacts,kinetic_energy,wall_work,force_floor_z,force_lid_z,"
+              "mean_force_floor_z,mean_force_lid_z,reaction_plate_xmin_z,max_displacement_plate\n")
+    rows = "0.0,0,10,0,0.0,0.0,0.0,0.0,0.0,0.0,1.5,0.0\n0.1,5,10,3,0.5,0.0,-2.0,0.0,-1.0,0.0,1.6,1e-6\n"
+    folder = write_history(tmp_path / "run", header + rows)
+    written = sorted(path.name for path in plot_history(folder))
+    assert written == ["deflections.png", "energies.png", "particles.png", "reactions.png", "wall_forces.png"]
+
+    constant = write_history(tmp_path / "still", header + rows.replace("0,3,", "0,0,").replace("-2.0,0.0,-1.0", "0.0,0.0,0.0")
+                             .replace(",1.6,1e-6", ",1.5,0.0"))
+    # Only the kinetic energy varies: no figure of forces, reactions, deflections or counts.
+    assert sorted(path.name for path in plot_history(constant)) == ["energies.png"]
+
+
+def test_is_constant_ignores_last_bit_noise_only():
+    assert is_constant(np.array([0.1 + 0.2, 0.3]))
+    assert not is_constant(np.array([1.0, 1.0 + 1e-9]))
+    assert is_constant(np.zeros(3))
