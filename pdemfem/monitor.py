@@ -41,6 +41,12 @@ log = logging.getLogger("pdemfem")
 ROUND_OFF = 1e-8
 
 _POTENTIALS = ("potential_energy", "solid_load_potential")
+
+
+def _potential(energies: dict) -> float:
+    """Energy that can turn into motion when it falls: gravity's and the loads' potentials, and the
+    negative part of the contacts' elastic energy (adhesive contacts pull the bodies together)."""
+    return sum(energies.get(name, 0.0) for name in _POTENTIALS) + min(energies.get("elastic_energy", 0.0), 0.0)
 _STORED = ("kinetic_energy", "rotational_energy", "elastic_energy", "solid_kinetic_energy", "solid_strain_energy")
 
 
@@ -104,7 +110,7 @@ class DivergenceMonitor:
         self.baseline = {
             "total": total_energy(energies) - placed_inside,
             "stored": sum(max(energies.get(name, 0.0), 0.0) for name in _STORED) - placed_inside,
-            "potential": sum(energies.get(name, 0.0) for name in _POTENTIALS),
+            "potential": _potential(energies),
             "wall_work": energies["wall_work"],
             "lost": system.lost_particles,
             "step": self.sim.step_count,
@@ -157,7 +163,7 @@ class DivergenceMonitor:
             self._take_baseline(energies)
             return None
         baseline = self.baseline
-        potential = sum(energies.get(name, 0.0) for name in _POTENTIALS)
+        potential = _potential(energies)
         self.lowest_potential = min(self.lowest_potential, potential)
         available = (baseline["stored"] + (baseline["potential"] - self.lowest_potential)
                      + abs(energies["wall_work"] - baseline["wall_work"]))

@@ -186,3 +186,31 @@ def test_moving_mesh_and_cylinder_walls_restart_bit_identical(tmp_path):
     history = np.genfromtxt(tmp_path / "history.csv", delimiter=",", names=True)
     assert np.abs(history["force_lid_z"]).max() > 0 and np.abs(history["force_drum_x"]).max() > 0
     assert_identical(uninterrupted, run(restart=checkpoint(tmp_path, 100)))
+
+
+@pytest.mark.mpi
+def test_cohesive_rolling_history_restarts_bit_identical_on_one_and_two_ranks(tmp_path):
+    """JKR adhesion and elastic-plastic rolling (touching flags and rolling springs in the contact
+    history of pairs, plane walls and the FE surface): exact continuation on 1 and 2 ranks, and
+    2 ranks agree with 1 to round-off."""
+    import restart_scenes
+    from pdemfem.simulation import Simulation
+
+    steps = 150
+    results = {}
+    for ranks in (1, 2):
+        out = tmp_path / f"ranks{ranks}"
+        run_under_mpi(ranks, "restart_case.py", out, steps, EVERY, tmp_path / f"full{ranks}.npz", "--cohesive")
+        run_under_mpi(ranks, "restart_case.py", out, steps, EVERY, tmp_path / f"cont{ranks}.npz", "--cohesive",
+                      "--restart", checkpoint(out, 100))
+        results[ranks] = dict(np.load(tmp_path / f"full{ranks}.npz"))
+        assert_identical(results[ranks], dict(np.load(tmp_path / f"cont{ranks}.npz")))
+    history = np.genfromtxt(tmp_path / "ranks1" / "history.csv", delimiter=",", names=True)
+    assert history["contacts"].max() > 0
+    scene = restart_scenes.cohesive(restart_scenes.pile_scene(tmp_path / "probe", steps, EVERY))
+    with restart_scenes.cross_rank_static_solve():
+        probe = Simulation.from_dict(scene, base_dir=tmp_path)
+    assert probe.particle_system.tables.history_width == 7
+    probe.run(progress=False)  # the step counts the tolerance needs
+    assert_identical(results[1], restart_scenes.gather_state(probe))
+    assert_close(results[1], results[2], round_off_tolerance(probe))
