@@ -20,6 +20,6 @@ def coefficient(damping_law: str, restitution: float) -> float:
     return normal_damping_coefficient(damping_law, restitution)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def dashpot(gamma, effective_mass, stiffness):
     return gamma * math.sqrt(effective_mass * stiffness)

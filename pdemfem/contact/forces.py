@@ -14,8 +14,8 @@ from numba import njit
 
 from pdemfem.contact.layout import COHESIVE
 from pdemfem.contact.registry import history_layout
-from pdemfem.contact.response import (clear_history, contact_response, history_in_use, pull_off_overlap,
-                                      released_energy, rigid_wall_contact, wall_contact_active)
+from pdemfem.contact.response import (clear_history, cohesive_contact_holds, contact_response, released_energy,
+                                      rigid_wall_contact)
 
 
 @njit(cache=True)
@@ -51,18 +51,21 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             apart = distance_squared >= radius_sum * radius_sum
             if apart and width == 0:
                 continue
-            material_j = material_index[j]
             if apart:
-                in_use = history_in_use(composition, pair_history, row)
+                in_use = False
+                for column in range(width):
+                    if pair_history[row, column] != 0.0:
+                        in_use = True
                 if not in_use:
                     # Most listed pairs are apart with an empty history.
                     continue
+                material_j = material_index[j]
                 effective_radius = radius_i * radii[j] / radius_sum
                 distance = math.sqrt(distance_squared)
                 # A formed cohesive contact holds down to its pull-off overlap.
-                if not (composition & COHESIVE) or pair_history[row, history_layout(composition)[2]] == 0.0 or (
-                        radius_sum - distance <= pull_off_overlap(composition, coefficients, material_i, material_j,
-                                                                  effective_radius)):
+                if not (composition & COHESIVE) or not cohesive_contact_holds(
+                        composition, coefficients, material_i, material_j, radius_sum - distance, effective_radius,
+                        pair_history, row):
                     if i_owned:
                         booked = j < owned_count or ids[i] < ids[j]
                     else:
@@ -80,6 +83,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
                     continue
             else:
                 distance = math.sqrt(distance_squared)
+                material_j = material_index[j]
             if i_owned:
                 booked = j < owned_count or ids[i] < ids[j]
             else:
@@ -144,6 +148,11 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
     m = inf); wall_forces[w] receives the force the particles exert on wall w.  wall_history
     is (particles, walls, history width).  Returns (elastic, dissipated, contacts).
     """
+    # One row per (particle, wall): slicing wall_history[i] in the loop would create (and reference-count)
+    # an array view per candidate, several times the cost of the test itself.
+    width = wall_history.shape[2]
+    wall_count = wall_history.shape[1]
+    history = wall_history.reshape(wall_history.shape[0] * wall_count, wall_history.shape[2])
     elastic_total = 0.0
     dissipated_total = 0.0
     contacts = 0
@@ -158,22 +167,29 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
                     + (positions[i, 1] - wall_points[w, 1]) * ny
                     + (positions[i, 2] - wall_points[w, 2]) * nz)
         overlap = radius - distance
-        history = wall_history[i]
-        if not wall_contact_active(composition, coefficients, material_index[i], wall_material[w], overlap, radius,
-                                   history, w):
-            if history_in_use(composition, history, w):
+        row = i * wall_count + w
+        active = overlap > 0.0
+        if not active and composition & COHESIVE:
+            active = cohesive_contact_holds(composition, coefficients, material_index[i], wall_material[w], overlap,
+                                            radius, history, row)
+        if not active:
+            in_use = False
+            for column in range(width):
+                if history[row, column] != 0.0:
+                    in_use = True
+            if in_use:
                 # The contact opened this step: what it held (booked as elastic) is lost.
                 previous_distance = distance - dt * ((velocities[i, 0] - wall_velocities[w, 0]) * nx
                                                      + (velocities[i, 1] - wall_velocities[w, 1]) * ny
                                                      + (velocities[i, 2] - wall_velocities[w, 2]) * nz)
                 dissipated_total += released_energy(composition, coefficients, material_index[i], wall_material[w],
-                                                    radius - previous_distance, mass[i], radius, history, w)
-                clear_history(composition, history, w)
+                                                    radius - previous_distance, mass[i], radius, history, row)
+                clear_history(composition, history, row)
             continue
         # Contact point on the plane, `distance` below the centre.
         fx, fy, fz, _, _, _, elastic, dissipated, _, _ = rigid_wall_contact(
             composition, i, nx, ny, nz, distance, wall_velocities[w, 0], wall_velocities[w, 1],
-            wall_velocities[w, 2], wall_material[w], history, w, velocities, angular_velocities, radii, mass,
+            wall_velocities[w, 2], wall_material[w], history, row, velocities, angular_velocities, radii, mass,
             inverse_inertia, material_index, coefficients, dt, forces, torques)
         elastic_total += elastic
         dissipated_total += dissipated

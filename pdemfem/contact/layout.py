@@ -36,6 +36,8 @@ ROLLING_BITS = 9         # bit ROLLING_BITS + code - 1: that rolling model is us
 MAXIMUM_ROLLING_MODELS = 4
 ROLLING_ANY = ((1 << MAXIMUM_ROLLING_MODELS) - 1) << ROLLING_BITS
 COHESIVE = 1 << 13       # some normal model in use attracts beyond touching: a "touching" flag per contact
+BOOKKEEPING = 1 << 14    # energies booked (always set by a scene: the run monitor needs them; cleared only
+                         # by benchmarks/contact_models.py to measure what the bookkeeping costs)
 
 # ---- history columns (the order is fixed; a block is present only when its bit is set;
 #      pdemfem.contact.registry.history_layout)

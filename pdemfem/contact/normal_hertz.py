@@ -28,7 +28,7 @@ def pull_off_distance(parameters_row, effective_modulus: float, effective_radius
     return 0.0
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
     """(elastic force, S_n, S_t, elastic energy) at `overlap` > 0."""
     contact_radius = math.sqrt(effective_radius * overlap)
@@ -38,13 +38,13 @@ def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
             0.4 * force * overlap)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def pull_off_overlap(coefficients, a, b, effective_radius):
     """The (negative) overlap at which a formed contact breaks: 0, Hertz does not attract."""
     return 0.0
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def friction_offset(coefficients, a, b, effective_radius):
     """Force added to F_n in the Coulomb limit mu (F_n + offset): none."""
     return 0.0

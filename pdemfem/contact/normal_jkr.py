@@ -52,7 +52,7 @@ def pull_off_distance(parameters_row, effective_modulus: float, effective_radius
     return 3.0 * (math.pi * work * effective_radius ** 2 / (8.0 * effective_modulus)) ** (2.0 / 3.0) / effective_radius
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def contact_radius(overlap, work, modulus, radius):
     """a(delta) on the stable branch (module docstring); valid for delta >= delta_c."""
     c = math.sqrt(2.0 * math.pi * work / modulus)
@@ -72,7 +72,7 @@ def contact_radius(overlap, work, modulus, radius):
     return s * s
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def _potential(a, work, modulus, radius):
     big_a = 4.0 * modulus / (3.0 * radius)
     big_b = math.sqrt(8.0 * math.pi * work * modulus)
@@ -81,7 +81,7 @@ def _potential(a, work, modulus, radius):
             + 0.25 * big_b * c * a * a)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
     work = coefficients[a, b, WORK_OF_ADHESION]
     modulus = coefficients[a, b, EFFECTIVE_MODULUS]
@@ -93,13 +93,13 @@ def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
     return (force, 2.0 * modulus * radius, 8.0 * coefficients[a, b, EFFECTIVE_SHEAR_MODULUS] * radius, energy)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def pull_off_overlap(coefficients, a, b, effective_radius):
     work = coefficients[a, b, WORK_OF_ADHESION]
     modulus = coefficients[a, b, EFFECTIVE_MODULUS]
     return -3.0 * (math.pi * work * effective_radius ** 2 / (8.0 * modulus)) ** (2.0 / 3.0) / effective_radius
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def friction_offset(coefficients, a, b, effective_radius):
     return 3.0 * math.pi * coefficients[a, b, WORK_OF_ADHESION] * effective_radius

@@ -30,7 +30,7 @@ def pull_off_distance(parameters_row, effective_modulus: float, effective_radius
     return 0.0
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
     stiffness = coefficients[a, b, STIFFNESS]
     if stiffness <= 0.0:
@@ -42,11 +42,11 @@ def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
             0.5 * stiffness * overlap * overlap)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def pull_off_overlap(coefficients, a, b, effective_radius):
     return 0.0
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def friction_offset(coefficients, a, b, effective_radius):
     return 0.0

@@ -64,7 +64,7 @@ def rolling_bit(model) -> int:
 ROLLING_HISTORY_BITS = sum(rolling_bit(model) for model in ROLLING_MODELS if model.HISTORY_COLUMNS)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def history_layout(composition):
     """(tangential column, rolling column, touching column, width) of a contact's history; -1: absent."""
     column = 0
@@ -98,7 +98,7 @@ def _later_mask(models, index, bit) -> int:
 def _normal_chain(models, index, function_name, zero):
     """Jitted dispatcher over models[index:] of the normal function `function_name`."""
     if index == len(models):
-        @njit
+        @njit(inline="always")
         def none_left(model, composition, overlap, coefficients, a, b, effective_mass, effective_radius):
             return zero
         return none_left
@@ -108,7 +108,7 @@ def _normal_chain(models, index, function_name, zero):
     later = _later_mask(models, index, normal_bit)
     rest = _normal_chain(models, index + 1, function_name, zero)
 
-    @njit
+    @njit(inline="always")
     def link(model, composition, overlap, coefficients, a, b, effective_mass, effective_radius):
         if composition & own_bit:
             if model == code or (composition & later) == 0:
@@ -120,7 +120,7 @@ def _normal_chain(models, index, function_name, zero):
 def _pair_constant_chain(models, index, function_name):
     """Like _normal_chain for the functions of (coefficients, a, b, R*) -> float."""
     if index == len(models):
-        @njit
+        @njit(inline="always")
         def none_left(model, composition, coefficients, a, b, effective_radius):
             return 0.0
         return none_left
@@ -130,7 +130,7 @@ def _pair_constant_chain(models, index, function_name):
     later = _later_mask(models, index, normal_bit)
     rest = _pair_constant_chain(models, index + 1, function_name)
 
-    @njit
+    @njit(inline="always")
     def link(model, composition, coefficients, a, b, effective_radius):
         if composition & own_bit:
             if model == code or (composition & later) == 0:
@@ -141,7 +141,7 @@ def _pair_constant_chain(models, index, function_name):
 
 def _rolling_chain(models, index):
     if index == len(models):
-        @njit
+        @njit(inline="always")
         def none_left(model, composition, coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force,
                       normal_stiffness, previous_normal_stiffness, effective_radius, effective_inertia, history,
                       row, column, dt):
@@ -153,7 +153,7 @@ def _rolling_chain(models, index):
     later = _later_mask(models, index, rolling_bit)
     rest = _rolling_chain(models, index + 1)
 
-    @njit
+    @njit(inline="always")
     def link(model, composition, coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness,
              previous_normal_stiffness, effective_radius, effective_inertia, history, row, column, dt):
         # Code 0 (no rolling resistance) never matches: a pair without it gets no torque.
@@ -169,7 +169,7 @@ def _rolling_chain(models, index):
 
 def _rolling_energy_chain(models, index):
     if index == len(models):
-        @njit
+        @njit(inline="always")
         def none_left(model, composition, coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
             return 0.0
         return none_left
@@ -178,7 +178,7 @@ def _rolling_energy_chain(models, index):
     own_bit = rolling_bit(models[index])
     rest = _rolling_energy_chain(models, index + 1)
 
-    @njit
+    @njit(inline="always")
     def link(model, composition, coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
         if composition & own_bit:
             if model == code:

@@ -16,12 +16,12 @@ from numba import njit
 
 from pdemfem.contact.damping_viscous import dashpot
 from pdemfem.contact import tangential_mindlin
-from pdemfem.contact.layout import COHESIVE, DAMPING, FRICTION, NORMAL_MODEL, ROLLING_ANY, ROLLING_MODEL
+from pdemfem.contact.layout import BOOKKEEPING, COHESIVE, DAMPING, FRICTION, NORMAL_MODEL, ROLLING_ANY, ROLLING_MODEL
 from pdemfem.contact.registry import (history_layout, normal_elastic, normal_friction_offset,
                                       normal_pull_off_overlap, rolling_spring_energy, rolling_torque)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def pull_off_overlap(composition, coefficients, a, b, effective_radius):
     """The overlap (<= 0) down to which a formed contact holds; 0 without cohesive models."""
     if composition & COHESIVE:
@@ -30,7 +30,7 @@ def pull_off_overlap(composition, coefficients, a, b, effective_radius):
     return 0.0
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def history_in_use(composition, history, row):
     """Whether the contact's history holds anything (a spring or the touching flag)."""
     width = history_layout(composition)[3]
@@ -40,7 +40,7 @@ def history_in_use(composition, history, row):
     return False
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def _previous_stiffnesses(composition, coefficients, a, b, previous_overlap, effective_mass, effective_radius):
     """(S_n, S_t, elastic energy) at the previous step's overlap; zeros when it was not a contact."""
     if previous_overlap > pull_off_overlap(composition, coefficients, a, b, effective_radius) and (
@@ -74,14 +74,14 @@ def released_energy(composition, coefficients, a, b, previous_overlap, effective
     return released
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def clear_history(composition, history, row):
     width = history_layout(composition)[3]
     for column in range(width):
         history[row, column] = 0.0
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz,
                      effective_mass, effective_radius, effective_inertia, history, row, dt):
     """Force and rolling moment on i for one contact; updates history[row].
@@ -120,8 +120,10 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
 
     previous_normal_stiffness = 0.0
     previous_tangential_stiffness = 0.0
-    if (tangential_column >= 0 or rolling_column >= 0) and history_in_use(composition, history, row):
-        # v dt is the step's relative displacement, so the last step's overlap was overlap - approach dt.
+    if composition & BOOKKEEPING and (tangential_column >= 0 or rolling_column >= 0) and history_in_use(
+            composition, history, row):
+        # The springs' energy before this step (the force does not need it): v dt is the step's relative
+        # displacement, so the last step's overlap was overlap - approach dt.
         previous_normal_stiffness, previous_tangential_stiffness, _ = _previous_stiffnesses(
             composition, coefficients, a, b, overlap - approach_rate * dt, effective_mass, effective_radius)
 
@@ -186,12 +188,12 @@ def rigid_wall_contact(composition, i, nx, ny, nz, distance, surface_vx, surface
 
 
 @njit(cache=True)
-def wall_contact_active(composition, coefficients, a, b, overlap, radius, history, slot):
-    """Whether a particle-wall contact acts at `overlap`: touching, or formed and above the pull-off."""
-    if overlap > 0.0:
-        return True
-    if composition & COHESIVE:
-        touching_column = history_layout(composition)[2]
-        if history[slot, touching_column] != 0.0:
-            return overlap > pull_off_overlap(composition, coefficients, a, b, radius)
-    return False
+def cohesive_contact_holds(composition, coefficients, a, b, overlap, effective_radius, history, row):
+    """Whether a contact that does not touch (overlap <= 0) still acts: formed and above its pull-off overlap.
+
+    Called only off the hot path (composition has COHESIVE and the bodies do not touch): an inlined
+    helper taking arrays costs reference counting on every candidate of every step."""
+    touching_column = history_layout(composition)[2]
+    if touching_column < 0 or history[row, touching_column] == 0.0:
+        return False
+    return overlap > pull_off_overlap(composition, coefficients, a, b, effective_radius)

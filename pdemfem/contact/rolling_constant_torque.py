@@ -22,7 +22,7 @@ def parameters(interaction) -> tuple:
     return ()
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, previous_normal_stiffness,
            effective_radius, effective_inertia, history, row, column, dt):
     """(moment on the first body (3), elastic energy, dissipated energy this step)."""
@@ -41,7 +41,7 @@ def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stif
     return scale * rx, scale * ry, scale * rz, 0.0, moment * rolling_speed * dt
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def spring_energy(coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
     """Energy a contact's rolling spring holds (none: no spring)."""
     return 0.0

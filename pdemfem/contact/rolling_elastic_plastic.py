@@ -32,7 +32,7 @@ def parameters(interaction) -> tuple:
     return (interaction.rolling_damping,)
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, previous_normal_stiffness,
            effective_radius, effective_inertia, history, row, column, dt):
     mu_r = coefficients[a, b, ROLLING_FRICTION]
@@ -86,7 +86,7 @@ def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stif
     return total_x, total_y, total_z, energy, dissipated
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def spring_energy(coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
     """|M_k|^2 / (2 k_r) at the normal stiffness S_n: what the spring loses when the contact opens."""
     stiffness = STIFFNESS_FACTOR * (coefficients[a, b, ROLLING_FRICTION] * effective_radius) ** 2 * normal_stiffness

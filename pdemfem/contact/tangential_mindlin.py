@@ -17,7 +17,7 @@ NAME = "mindlin"
 HISTORY_COLUMNS = 3
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, previous_stiffness, damping, friction_limit,
           history, row, column, dt):
     """(F_t (3), c_t in effect, spring energy after, spring energy before, dissipated this step); updates xi.
@@ -74,7 +74,7 @@ def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, previous_stiffness, d
     return fx, fy, fz, damping, energy, dissipated
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def spring_energy(stiffness, history, row, column):
     """1/2 S_t |xi|^2: what a contact that opens with a loaded spring loses."""
     xi_squared = history[row, column] ** 2 + history[row, column + 1] ** 2 + history[row, column + 2] ** 2

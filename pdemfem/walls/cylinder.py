@@ -22,7 +22,8 @@ import numpy as np
 from numba import njit
 
 from pdemfem import state_dict as kinds
-from pdemfem.contact.response import history_in_use, released_energy, rigid_wall_contact, wall_contact_active
+from pdemfem.contact.layout import COHESIVE
+from pdemfem.contact.response import cohesive_contact_holds, released_energy, rigid_wall_contact
 from pdemfem.walls.base import ContributorWall, rotation_matrix
 
 
@@ -35,6 +36,8 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
 
     Returns (elastic, dissipated, contacts, work done on the particles)."""
     overlap_column = history.shape[2] - 1
+    # One row per particle (a view per particle in the loop would cost reference counting every step).
+    rows = history.reshape(history.shape[0], history.shape[2])
     elastic_total = 0.0
     dissipated_total = 0.0
     work = 0.0
@@ -57,7 +60,6 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         ny = 0.0
         nz = 0.0
         touching = rho > 0.0
-        particle_history = history[i]
         if touching:
             if inside:
                 distance = cylinder_radius - rho
@@ -69,15 +71,20 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
                 nx = rx / rho
                 ny = ry / rho
                 nz = rz / rho
-            touching = wall_contact_active(composition, coefficients, material_index[i], wall_row, radius - distance,
-                                           radius, particle_history, 0)
+            touching = distance < radius
+            if not touching and composition & COHESIVE:
+                touching = cohesive_contact_holds(composition, coefficients, material_index[i], wall_row,
+                                                  radius - distance, radius, rows, i)
         if not touching:
-            if history_in_use(composition, particle_history, 0):
+            in_use = False
+            for column in range(overlap_column):
+                if rows[i, column] != 0.0:
+                    in_use = True
+            if in_use:
                 dissipated_total += released_energy(composition, coefficients, material_index[i], wall_row,
-                                                    particle_history[0, overlap_column], mass[i], radius,
-                                                    particle_history, 0)
+                                                    rows[i, overlap_column], mass[i], radius, rows, i)
             for column in range(overlap_column + 1):
-                particle_history[0, column] = 0.0
+                rows[i, column] = 0.0
             continue
         lever = distance
         qx = positions[i, 0] - lever * nx
@@ -91,9 +98,9 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         sy = velocity[1] + angular_velocity[2] * ax - angular_velocity[0] * az
         sz = velocity[2] + angular_velocity[0] * ay - angular_velocity[1] * ax
         fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = rigid_wall_contact(
-            composition, i, nx, ny, nz, distance, sx, sy, sz, wall_row, particle_history, 0, velocities,
+            composition, i, nx, ny, nz, distance, sx, sy, sz, wall_row, rows, i, velocities,
             angular_velocities, radii, mass, inverse_inertia, material_index, coefficients, dt, forces, torques)
-        particle_history[0, overlap_column] = radius - distance  # this step's overlap
+        rows[i, overlap_column] = radius - distance  # this step's overlap
         elastic_total += elastic
         dissipated_total += dissipated
         work += (fx * sx + fy * sy + fz * sz) * dt
