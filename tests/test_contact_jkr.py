@@ -189,3 +189,44 @@ def test_hanging_sphere_comes_off_at_the_pull_off_force(load_fraction, holds, tm
     else:
         assert sim.particle_system.contact_count == 0
         assert gap > 10.0 * abs(pull_off_overlap_analytic(WORK, modulus, RADIUS))
+
+
+def _write_flat_stl(path, half_width, cells):
+    """A square z = 0 of 2 cells^2 triangles, normals +z (ASCII STL)."""
+    edges = np.linspace(-half_width, half_width, cells + 1)
+    lines = ["solid flat"]
+    for i in range(cells):
+        for j in range(cells):
+            a = (edges[i], edges[j], 0.0)
+            b = (edges[i + 1], edges[j], 0.0)
+            c = (edges[i + 1], edges[j + 1], 0.0)
+            d = (edges[i], edges[j + 1], 0.0)
+            for triangle in ((a, b, c), (a, c, d)):
+                lines.append("facet normal 0 0 1\n outer loop")
+                lines += [f"  vertex {x:.9g} {y:.9g} {z:.9g}" for x, y, z in triangle]
+                lines.append(" endloop\nendfacet")
+    lines.append("endsolid flat")
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize("kind", ["mesh", "cylinder"])
+def test_sphere_sticks_to_mesh_and_cylinder_walls_at_the_zero_load_overlap(kind, tmp_path):
+    """The same adhesion through the triangle-mesh and cylinder kernels (a sphere released touching a
+    flat triangulated floor, off the triangles' shared edges; inside a drum of radius 1 m, whose
+    curvature the wall contact ignores by design)."""
+    modulus = _effective_modulus(2)
+    a0 = zero_load_radius(WORK, modulus, RADIUS)
+    delta0 = a0 * a0 / (3.0 * RADIUS)
+    scene = _sphere_on_plane(RADIUS - 1e-3 * delta0, (0.0, 0.0, 0.0), WORK)
+    if kind == "mesh":
+        _write_flat_stl(tmp_path / "flat.stl", 0.01, 4)
+        scene["walls"] = [{"name": "floor", "kind": "mesh", "file": str(tmp_path / "flat.stl"), "material": "soft"}]
+        scene["particles"][0]["insert"]["positions"] = [[0.0013, 0.0007, RADIUS - 1e-3 * delta0]]
+    else:
+        # Drum axis along y through (0, 0, 1 m): its lowest line is z = 0.
+        scene["walls"] = [{"name": "drum", "kind": "cylinder", "axis": {"point": [0, 0, 1.0], "direction": [0, 1, 0]},
+                           "radius": 1.0, "inside": True, "material": "soft"}]
+    sim = Simulation.from_dict(scene, output_dir=tmp_path / "out")
+    sim.run(progress=False)
+    overlap = RADIUS - sim.particles.positions[0, 2]
+    assert overlap == pytest.approx(delta0, rel=0.01)  # the model's promise

@@ -41,13 +41,13 @@ def history_in_use(composition, history, row):
 
 
 @njit(inline="always", cache=True)
-def _previous_stiffnesses(composition, coefficients, a, b, previous_overlap, effective_mass, effective_radius):
+def _previous_stiffnesses(composition, model, coefficients, a, b, previous_overlap, effective_mass,
+                          effective_radius):
     """(S_n, S_t, elastic energy) at the previous step's overlap; zeros when it was not a contact."""
-    if previous_overlap > pull_off_overlap(composition, coefficients, a, b, effective_radius) and (
-            previous_overlap > 0.0 or composition & COHESIVE):
+    if previous_overlap > 0.0 or (composition & COHESIVE and previous_overlap > pull_off_overlap(
+            composition, coefficients, a, b, effective_radius)):
         force, normal_stiffness, tangential_stiffness, energy = normal_elastic(
-            int(coefficients[a, b, NORMAL_MODEL]), composition, previous_overlap, coefficients, a, b,
-            effective_mass, effective_radius)
+            model, composition, previous_overlap, coefficients, a, b, effective_mass, effective_radius)
         return normal_stiffness, tangential_stiffness, energy
     return 0.0, 0.0, 0.0
 
@@ -59,7 +59,8 @@ def released_energy(composition, coefficients, a, b, previous_overlap, effective
     energy, and a cohesive contact's elastic energy (the adhesion hysteresis)."""
     tangential_column, rolling_column, touching_column, width = history_layout(composition)
     normal_stiffness, tangential_stiffness, normal_energy = _previous_stiffnesses(
-        composition, coefficients, a, b, previous_overlap, effective_mass, effective_radius)
+        composition, int(coefficients[a, b, NORMAL_MODEL]), coefficients, a, b, previous_overlap, effective_mass,
+        effective_radius)
     released = 0.0
     if tangential_column >= 0:
         released += tangential_mindlin.spring_energy(tangential_stiffness, history, row, tangential_column)
@@ -92,9 +93,9 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
     deformable surface applies the dashpot to its own nodes at its own rate (pdemfem.coupling.dampers).
     """
     tangential_column, rolling_column, touching_column, width = history_layout(composition)
+    model = int(coefficients[a, b, NORMAL_MODEL])
     elastic_force, normal_stiffness, tangential_stiffness, elastic_energy = normal_elastic(
-        int(coefficients[a, b, NORMAL_MODEL]), composition, overlap, coefficients, a, b, effective_mass,
-        effective_radius)
+        model, composition, overlap, coefficients, a, b, effective_mass, effective_radius)
     if touching_column >= 0:
         history[row, touching_column] = 1.0
 
@@ -120,20 +121,24 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
 
     previous_normal_stiffness = 0.0
     previous_tangential_stiffness = 0.0
-    if composition & BOOKKEEPING and (tangential_column >= 0 or rolling_column >= 0) and history_in_use(
-            composition, history, row):
+    if composition & BOOKKEEPING and (tangential_column >= 0 or rolling_column >= 0):
         # The springs' energy before this step (the force does not need it): v dt is the step's relative
         # displacement, so the last step's overlap was overlap - approach dt.
-        previous_normal_stiffness, previous_tangential_stiffness, _ = _previous_stiffnesses(
-            composition, coefficients, a, b, overlap - approach_rate * dt, effective_mass, effective_radius)
+        in_use = False
+        for column in range(width):
+            if history[row, column] != 0.0:
+                in_use = True
+        if in_use:
+            previous_normal_stiffness, previous_tangential_stiffness, _ = _previous_stiffnesses(
+                composition, model, coefficients, a, b, overlap - approach_rate * dt, effective_mass,
+                effective_radius)
 
     if tangential_column >= 0:
         friction = coefficients[a, b, FRICTION]
         if friction > 0.0:
             load = normal_force
             if composition & COHESIVE:
-                load += normal_friction_offset(int(coefficients[a, b, NORMAL_MODEL]), composition, coefficients,
-                                               a, b, effective_radius)
+                load += normal_friction_offset(model, composition, coefficients, a, b, effective_radius)
             tangential_damping = dashpot(gamma, effective_mass, tangential_stiffness)
             tx, ty, tz, tangential_damping, spring_energy, tangential_dissipated = tangential_mindlin.force(
                 nx, ny, nz, vx, vy, vz, normal_speed, tangential_stiffness, previous_tangential_stiffness,
