@@ -11,6 +11,7 @@ import math
 
 from numba import njit
 
+from pdemfem.contact.geometry import no_pull_off
 from pdemfem.contact.layout import EFFECTIVE_MODULUS, EFFECTIVE_SHEAR_MODULUS
 
 NAME = "hertz_mindlin"
@@ -38,13 +39,6 @@ def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
             0.4 * force * overlap)
 
 
-@njit(inline="always", cache=True)
-def pull_off_overlap(coefficients, a, b, effective_radius):
-    """The (negative) overlap at which a formed contact breaks: 0, Hertz does not attract."""
-    return 0.0
-
-
-@njit(inline="always", cache=True)
-def friction_offset(coefficients, a, b, effective_radius):
-    """Force added to F_n in the Coulomb limit mu (F_n + offset): none."""
-    return 0.0
+# Not cohesive: a contact opens at zero overlap and friction sees F_n alone.
+pull_off_overlap = no_pull_off
+friction_offset = no_pull_off

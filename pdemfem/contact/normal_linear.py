@@ -10,6 +10,7 @@ import math
 
 from numba import njit
 
+from pdemfem.contact.geometry import no_pull_off
 from pdemfem.contact.layout import EFFECTIVE_MODULUS, NORMAL_PARAMETERS
 
 NAME = "linear_spring_dashpot"
@@ -42,11 +43,6 @@ def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
             0.5 * stiffness * overlap * overlap)
 
 
-@njit(inline="always", cache=True)
-def pull_off_overlap(coefficients, a, b, effective_radius):
-    return 0.0
-
-
-@njit(inline="always", cache=True)
-def friction_offset(coefficients, a, b, effective_radius):
-    return 0.0
+# Not cohesive: a contact opens at zero overlap and friction sees F_n alone.
+pull_off_overlap = no_pull_off
+friction_offset = no_pull_off

@@ -18,6 +18,7 @@ import math
 
 from numba import njit
 
+from pdemfem.contact.geometry import turn_into_tangent_plane
 from pdemfem.contact.layout import ROLLING_FRICTION, ROLLING_PARAMETERS
 
 NAME = "elastic_plastic"
@@ -47,17 +48,7 @@ def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stif
     if old_squared > 0.0:
         if previous_stiffness > 0.0:
             energy_before = 0.5 * old_squared / previous_stiffness
-        # Keep the spring in the current tangent plane, with its length.
-        along_normal = mx * nx + my * ny + mz * nz
-        mx -= along_normal * nx
-        my -= along_normal * ny
-        mz -= along_normal * nz
-        new_squared = mx * mx + my * my + mz * mz
-        if new_squared > 0.0:
-            scale = math.sqrt(old_squared / new_squared)
-            mx *= scale
-            my *= scale
-            mz *= scale
+        mx, my, mz = turn_into_tangent_plane(mx, my, mz, nx, ny, nz)
     along_normal = wx * nx + wy * ny + wz * nz
     rx = wx - along_normal * nx
     ry = wy - along_normal * ny

@@ -13,6 +13,8 @@ import math
 
 from numba import njit
 
+from pdemfem.contact.geometry import turn_into_tangent_plane
+
 NAME = "mindlin"
 HISTORY_COLUMNS = 3
 
@@ -32,16 +34,7 @@ def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, previous_stiffness, d
     old_length_squared = xi_x * xi_x + xi_y * xi_y + xi_z * xi_z
     energy_before = 0.0
     if old_length_squared > 0.0:
-        along_normal = xi_x * nx + xi_y * ny + xi_z * nz
-        xi_x -= along_normal * nx
-        xi_y -= along_normal * ny
-        xi_z -= along_normal * nz
-        new_length_squared = xi_x * xi_x + xi_y * xi_y + xi_z * xi_z
-        if new_length_squared > 0.0:
-            scale = math.sqrt(old_length_squared / new_length_squared)
-            xi_x *= scale
-            xi_y *= scale
-            xi_z *= scale
+        xi_x, xi_y, xi_z = turn_into_tangent_plane(xi_x, xi_y, xi_z, nx, ny, nz)
         # The energy booked last step used last step's stiffness (Hertz: S_t ~ sqrt(delta)).
         energy_before = 0.5 * previous_stiffness * (xi_x * xi_x + xi_y * xi_y + xi_z * xi_z)
     xi_x += tx * dt
