@@ -78,11 +78,13 @@ FULL = {
     "bed_pre_steps": 3000,
     "bed_steps": 1000,
     "skins": [0.1, 0.2, 0.3, 0.5, 1.0],
+    "checkpoints": [500, 700, 1000, 1500, 2000, 3000],   # steps (within bed_pre_steps) where positions are compared
     "cantilever_p1": [(10, 1, 1), (20, 2, 2), (40, 4, 4), (80, 8, 8)],
     "cantilever_p2": [(5, 1, 1), (10, 1, 1), (20, 2, 2), (40, 4, 4)],
     "bar_cells": [4, 8, 16, 32],
     "fem_every": [1, 2, 5, 10],
     "fem_every_cells": 8,
+    "repeats": 3,
     "ranks": [1, 2],
 }
 QUICK = {
@@ -95,11 +97,13 @@ QUICK = {
     "bed_pre_steps": 1500,
     "bed_steps": 300,
     "skins": [0.1, 0.3, 1.0],
+    "checkpoints": [500, 1000],
     "cantilever_p1": [(10, 1, 1), (20, 2, 2)],
     "cantilever_p2": [(5, 1, 1), (10, 1, 1)],
     "bar_cells": [4, 8],
     "fem_every": [1, 2, 5, 10],
     "fem_every_cells": 2,
+    "repeats": 1,
     "ranks": [1, 2],
 }
 
@@ -251,7 +255,8 @@ def knob_rolling_friction(settings: dict, bed_costs: dict, log) -> dict:
         row = {"rolling_friction": mu_r if on else 0.0, "deceleration": -slope,
                "deceleration_error": -slope / deceleration - 1.0, "distance_error": distance / exact_distance - 1.0,
                "seconds_per_step": seconds / steps,
-               "bed_seconds_per_step": bed_costs["rolling_on" if on else "rolling_off"]["seconds_per_step"]}
+               "bed_seconds_per_step": bed_costs["rolling_on" if on else "rolling_off"]["seconds_per_step"],
+               "bed_cpu_seconds_per_step": bed_costs["rolling_on" if on else "rolling_off"]["cpu_seconds_per_step"]}
         rows.append(row)
         log(f"  rolling resistance {'on ' if on else 'off'}: deceleration {-slope:.4f} m/s^2 "
             f"({row['deceleration_error']:+.2%}), distance over {sim.time:.3f} s {row['distance_error']:+.2%}, "
@@ -273,19 +278,36 @@ def bed_scene(particles: int, skin_factor: float = 0.3, model: str = "hertz_mind
     return scene
 
 
-def run_bed(scene: dict, pre_steps: int, steps: int, comm=None, nudge: bool = False) -> dict:
+def _gathered_positions(sim, comm):
+    """Positions by particle id on rank 0 (None elsewhere)."""
+    particles = sim.particles
+    gathered = comm.gather((particles.ids, particles.positions), root=0)
+    if comm.rank != 0:
+        return None
+    ids = np.concatenate([part[0] for part in gathered])
+    return np.concatenate([part[1] for part in gathered])[np.argsort(ids)]
+
+
+def run_bed(scene: dict, pre_steps: int, steps: int, comm=None, nudge: bool = False, checkpoints=()) -> dict:
     """Build, take pre_steps untimed, time `steps`; returns wall seconds per step (max over ranks), rebuilds,
-    listed pairs and contacts at the end, and the positions and velocities by particle id (rank 0).
+    listed pairs and contacts at the end, and (rank 0) the positions by particle id at the end and at each
+    checkpoint (a step count within the untimed pre_steps).
     nudge: move one particle by one unit in the last place of its x at the start (the yardstick of round-off)."""
     from mpi4py import MPI
 
     comm = comm or MPI.COMM_WORLD
+    snapshots = {}
     with tempfile.TemporaryDirectory(prefix="tradeoffs-bed-") as scratch:
         sim = Simulation.from_dict(scene, comm=comm, output_dir=scratch)
         if nudge and sim.particle_system.state.owned_count:
             positions = sim.particle_system.state.positions
             positions[0, 0] = np.nextafter(positions[0, 0], np.inf)
-        sim.step(pre_steps)
+        done = 0
+        for mark in sorted(mark for mark in checkpoints if mark <= pre_steps):
+            sim.step(mark - done)
+            done = mark
+            snapshots[mark] = _gathered_positions(sim, comm)
+        sim.step(pre_steps - done)
         system = sim.particle_system
         original = system._rebuild
         counter = {"rebuilds": 0}
@@ -296,27 +318,31 @@ def run_bed(scene: dict, pre_steps: int, steps: int, comm=None, nudge: bool = Fa
 
         system._rebuild = counted
         comm.Barrier()
-        started = time.perf_counter()
+        started, cpu_started = time.perf_counter(), time.process_time()
         sim.step(steps)
+        cpu = comm.allreduce(time.process_time() - cpu_started, op=MPI.MAX)
         elapsed = comm.allreduce(time.perf_counter() - started, op=MPI.MAX)
         system._rebuild = original
         pairs = comm.allreduce(int(system.neighbors.pair_count))
         contacts = sim.contact_count()
-        particles = sim.particles
-        gathered = comm.gather((particles.ids, particles.positions, particles.velocities), root=0)
-    result = {"seconds_per_step": elapsed / steps, "rebuilds": comm.allreduce(counter["rebuilds"], op=MPI.MAX),
+        snapshots[pre_steps + steps] = _gathered_positions(sim, comm)
+    result = {"seconds_per_step": elapsed / steps, "cpu_seconds_per_step": cpu / steps, "rebuilds": comm.allreduce(counter["rebuilds"], op=MPI.MAX),
               "listed_pairs": pairs, "contacts": contacts, "steps": steps, "pre_steps": pre_steps}
     if comm.rank == 0:
-        ids = np.concatenate([part[0] for part in gathered])
-        order = np.argsort(ids)
-        result["positions"] = np.concatenate([part[1] for part in gathered])[order]
-        result["velocities"] = np.concatenate([part[2] for part in gathered])[order]
+        result["positions"] = snapshots[pre_steps + steps]
+        result["snapshots"] = snapshots
     return result
 
 
 def _position_difference(run: dict, reference: dict) -> float:
-    """Largest position difference over all particles, in particle radii."""
+    """Largest position difference over all particles at the end, in particle radii."""
     return float(np.abs(run["positions"] - reference["positions"]).max() / settle.RADIUS)
+
+
+def _difference_growth(run: dict, reference: dict) -> dict:
+    """Largest position difference [radii] at every step both runs were sampled at."""
+    return {str(step): float(np.abs(run["snapshots"][step] - reference["snapshots"][step]).max() / settle.RADIUS)
+            for step in sorted(run["snapshots"]) if step in reference["snapshots"]}
 
 
 def bed_costs(settings: dict, log) -> dict:
@@ -326,9 +352,10 @@ def bed_costs(settings: dict, log) -> dict:
                 "rolling_on": {"rolling_friction": 0.05}}
     for name, keys in variants.items():
         run = run_bed(bed_scene(settings["bed_particles"], **keys), settings["bed_pre_steps"], settings["bed_steps"])
-        costs[name] = {key: run[key] for key in ("seconds_per_step", "rebuilds", "listed_pairs", "contacts")}
-        log(f"  bed ({settings['bed_particles']} spheres) {name:10s}: {run['seconds_per_step'] * 1e3:.3f} ms/step, "
-            f"{run['contacts']} contacts")
+        costs[name] = {key: run[key] for key in ("seconds_per_step", "cpu_seconds_per_step", "rebuilds", "listed_pairs",
+                                                 "contacts")}
+        log(f"  bed ({settings['bed_particles']} spheres) {name:10s}: {run['seconds_per_step'] * 1e3:.3f} ms/step "
+            f"({run['cpu_seconds_per_step'] * 1e3:.3f} ms CPU), {run['contacts']} contacts")
     costs["rolling_off"] = costs["hertz"]
     return costs
 
@@ -336,36 +363,45 @@ def bed_costs(settings: dict, log) -> dict:
 def knob_verlet_skin(settings: dict, log) -> dict:
     runs = {}
     for skin in settings["skins"]:
-        runs[skin] = run_bed(bed_scene(settings["bed_particles"], skin), settings["bed_pre_steps"], settings["bed_steps"])
+        runs[skin] = run_bed(bed_scene(settings["bed_particles"], skin), settings["bed_pre_steps"], settings["bed_steps"],
+                             checkpoints=settings["checkpoints"])
     reference = runs[0.3]
-    nudged = run_bed(bed_scene(settings["bed_particles"], 0.3), settings["bed_pre_steps"], settings["bed_steps"], nudge=True)
+    nudged = run_bed(bed_scene(settings["bed_particles"], 0.3), settings["bed_pre_steps"], settings["bed_steps"], nudge=True,
+                     checkpoints=settings["checkpoints"])
     roundoff = _position_difference(nudged, reference)
-    log(f"  round-off yardstick: skin 0.3 r with one particle moved by 1 ulp at the start: {roundoff:.2e} r")
+    roundoff_growth = _difference_growth(nudged, reference)
+    log(f"  round-off yardstick: skin 0.3 r with one particle moved by 1 ulp at the start: "
+        + ", ".join(f"{value:.1e}" for value in roundoff_growth.values()) + f" r at steps {', '.join(roundoff_growth)}")
     rows = []
     for skin, run in runs.items():
-        row = {"skin_radii": skin, "seconds_per_step": run["seconds_per_step"], "rebuilds": run["rebuilds"],
+        row = {"skin_radii": skin, "seconds_per_step": run["seconds_per_step"],
+               "cpu_seconds_per_step": run["cpu_seconds_per_step"], "rebuilds": run["rebuilds"],
                "listed_pairs": run["listed_pairs"], "contacts": run["contacts"],
                "position_difference_radii": _position_difference(run, reference),
-               "velocity_difference_relative": float(np.abs(run["velocities"] - reference["velocities"]).max()
-                                                     / np.abs(reference["velocities"]).max())}
+               "position_difference_growth": _difference_growth(run, reference)}
         rows.append(row)
-        log(f"  skin {skin:4.2f} r: {run['seconds_per_step'] * 1e3:.3f} ms/step, {run['rebuilds']} rebuilds, "
-            f"{run['listed_pairs']} listed pairs, positions vs skin 0.3 r: {row['position_difference_radii']:.2e} r")
+        log(f"  skin {skin:4.2f} r: {run['seconds_per_step'] * 1e3:.3f} ms/step ({run['cpu_seconds_per_step'] * 1e3:.3f} "
+            f"ms CPU), {run['rebuilds']} rebuilds, "
+            f"{run['listed_pairs']} listed pairs, positions vs skin 0.3 r: "
+            + ", ".join(f"{value:.1e}" for value in row["position_difference_growth"].values()))
     return {"reference": "the default skin (0.3 r): the same physics, other summation order",
             "particles": settings["bed_particles"], "steps": settings["bed_steps"],
-            "pre_steps": settings["bed_pre_steps"], "one_ulp_difference_radii": roundoff, "rows": rows}
+            "pre_steps": settings["bed_pre_steps"], "one_ulp_difference_radii": roundoff,
+            "one_ulp_difference_growth": roundoff_growth, "rows": rows}
 
 
 # ============================================================================= ranks (subprocesses)
-def ranks_worker(path: str, particles: int, pre_steps: int, steps: int) -> None:
+def ranks_worker(path: str, particles: int, pre_steps: int, steps: int, checkpoints) -> None:
     from mpi4py import MPI
 
     tiny = bed_scene(27 * MPI.COMM_WORLD.size)
     with tempfile.TemporaryDirectory(prefix="tradeoffs-tiny-") as scratch:
         Simulation.from_dict(tiny, output_dir=scratch).step(3)   # compile (or load) the kernels untimed
-    run = run_bed(bed_scene(particles), pre_steps, steps)
+    run = run_bed(bed_scene(particles), pre_steps, steps, checkpoints=checkpoints)
     if MPI.COMM_WORLD.rank == 0:
-        np.savez(path, positions=run.pop("positions"), velocities=run.pop("velocities"),
+        snapshots = run.pop("snapshots")
+        run.pop("positions")
+        np.savez(path, **{f"step{step}": value for step, value in snapshots.items()},
                  summary=json.dumps(dict(run, ranks=MPI.COMM_WORLD.size)))
 
 
@@ -376,20 +412,23 @@ def knob_ranks(settings: dict, log) -> dict:
             path = os.path.join(scratch, f"ranks{ranks}.npz")
             command = [sys.executable, "-m", "pdemfem.launch", "-n", str(ranks), "--", sys.executable,
                        str(Path(__file__).resolve()), WORKER_FLAG, path, str(settings["bed_particles"]),
-                       str(settings["bed_pre_steps"]), str(settings["bed_steps"])]
+                       str(settings["bed_pre_steps"]), str(settings["bed_steps"]),
+                       ",".join(map(str, settings["checkpoints"]))]
             subprocess.run(command, check=True, cwd=REPOSITORY, env=dict(os.environ, PYTHONPATH=str(REPOSITORY)))
             with np.load(path) as stored:
-                runs[ranks] = dict(json.loads(str(stored["summary"])), positions=stored["positions"],
-                                   velocities=stored["velocities"])
+                snapshots = {int(key[4:]): stored[key] for key in stored.files if key.startswith("step")}
+                runs[ranks] = dict(json.loads(str(stored["summary"])), snapshots=snapshots,
+                                   positions=snapshots[max(snapshots)])
     reference = runs[settings["ranks"][0]]
     rows = []
     for ranks, run in runs.items():
         row = {"ranks": ranks, "seconds_per_step": run["seconds_per_step"], "contacts": run["contacts"],
                "position_difference_radii": _position_difference(run, reference),
+               "position_difference_growth": _difference_growth(run, reference),
                "speedup": reference["seconds_per_step"] / run["seconds_per_step"]}
         rows.append(row)
         log(f"  {ranks} rank(s): {run['seconds_per_step'] * 1e3:.3f} ms/step (speed-up {row['speedup']:.2f}), "
-            f"positions vs 1 rank: {row['position_difference_radii']:.2e} r")
+            "positions vs 1 rank: " + ", ".join(f"{value:.1e}" for value in row["position_difference_growth"].values()))
     return {"reference": "1 rank: the same physics, other summation order across the subdomain boundary",
             "particles": settings["bed_particles"], "steps": settings["bed_steps"], "rows": rows}
 
@@ -484,6 +523,8 @@ def knob_fem_every(settings: dict, log) -> dict:
             scene["gravity"] = [0.0, 0.0, 0.0]   # the rebound is then the sphere's speed after the pulse
             effective = Simulation.from_dict(scene, output_dir=scratch).coupling.fem_every   # run may lower k (held force)
             measured = coupled_refinement.measure_impact(scene, scratch)
+            for _ in range(settings["repeats"] - 1):   # the fastest of the repeats: sharing only slows a run down
+                measured["seconds"] = min(measured["seconds"], coupled_refinement.measure_impact(scene, scratch)["seconds"])
             steps = len(measured["times"]) - 1
             row = {"fem_every": every, "effective_fem_every": effective, "rebound": measured["invariant"], "peak_force": measured["sampled_peak_force"],
                    "indentation": measured["block_indentation"], "fem_substeps": measured["fem_substeps"],
@@ -571,12 +612,13 @@ def draw(results: dict, folder: Path) -> list:
             axes[1].legend(fontsize=8)
         save(figure, "fem")
 
-    panels = [name for name in ("fem_every", "verlet_skin", "ranks") if name in knobs]
+    panels = [name for name in ("fem_every", "verlet_skin", "identity", "ranks")
+              if name in knobs or (name == "identity" and "verlet_skin" in knobs)]
     if panels:
-        figure, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), squeeze=False)
+        figure, axes = plt.subplots(1, len(panels), figsize=(3.6 * len(panels), 3.4), squeeze=False)
         for axis, name in zip(axes[0], panels):
-            rows = knobs[name]["rows"]
             if name == "fem_every":
+                rows = knobs[name]["rows"]
                 base = rows[0]["seconds_per_step"]
                 for key in ("rebound", "peak_force", "indentation"):
                     axis.semilogy([row["seconds_per_step"] / base for row in rows[1:]],
@@ -589,22 +631,41 @@ def draw(results: dict, folder: Path) -> list:
                 axis.set_title("coupling: fem_every")
                 axis.legend(fontsize=7)
             elif name == "verlet_skin":
+                rows = knobs[name]["rows"]
                 skins = [row["skin_radii"] for row in rows]
-                base = [row for row in rows if row["skin_radii"] == 0.3][0]["seconds_per_step"]
-                axis.plot(skins, [row["seconds_per_step"] / base for row in rows], "o-", label="cost per step / skin 0.3 r")
+                base = [row for row in rows if row["skin_radii"] == 0.3][0]["cpu_seconds_per_step"]
+                axis.plot(skins, [row["cpu_seconds_per_step"] / base for row in rows], "o-", label="CPU per step / skin 0.3 r")
                 axis.set_xlabel("skin [radii]")
                 axis.set_ylabel("relative cost")
-                axis.set_title("Verlet skin (results identical)")
+                axis.set_title("Verlet skin: cost")
                 twin = axis.twinx()
-                twin.plot(skins, [row["rebuilds"] for row in rows], "s--", color="C1", label="rebuilds")
-                twin.set_ylabel("list rebuilds", color="C1")
+                twin.plot(skins, [row["rebuilds"] for row in rows], "s--", color="C1")
+                twin.set_ylabel("list rebuilds (dashed)", color="C1")
                 axis.legend(fontsize=7, loc="upper center")
+            elif name == "identity":
+                section = knobs["verlet_skin"]
+                growth = section["one_ulp_difference_growth"]
+                axis.semilogy([int(step) for step in growth], [max(value, 1e-17) for value in growth.values()], "k-", lw=3,
+                              alpha=0.4, label="1 ulp moved (skin 0.3 r)")
+                for row in section["rows"]:
+                    if row["skin_radii"] != 0.3:
+                        growth = row["position_difference_growth"]
+                        axis.semilogy([int(step) for step in growth], [max(v, 1e-17) for v in growth.values()], ".-",
+                                      label=f"skin {row['skin_radii']} r")
+                for row in knobs.get("ranks", {}).get("rows", [])[1:]:
+                    growth = row["position_difference_growth"]
+                    axis.semilogy([int(step) for step in growth], [max(v, 1e-17) for v in growth.values()], "x--",
+                                  label=f"{row['ranks']} ranks vs 1")
+                axis.set_xlabel("step")
+                axis.set_ylabel("max position difference [radii]")
+                axis.set_title("skin, ranks: round-off only")
+                axis.legend(fontsize=6)
             else:
-                ranks = [row["ranks"] for row in rows]
-                axis.bar([str(r) for r in ranks], [row["seconds_per_step"] * 1e3 for row in rows])
+                rows = knobs[name]["rows"]
+                axis.bar([str(row["ranks"]) for row in rows], [row["seconds_per_step"] * 1e3 for row in rows])
                 axis.set_xlabel("MPI ranks")
-                axis.set_ylabel("ms per step")
-                axis.set_title("ranks (results identical)")
+                axis.set_ylabel("wall ms per step")
+                axis.set_title("ranks: cost (shared 2 cores)")
         save(figure, "cost")
     return written
 
@@ -627,18 +688,18 @@ def summary(results: dict) -> list:
         for row in section["rows"]:
             rows.append(("contact model", f"linear at {row['speed']} m/s", "duration vs Hertz",
                          row["linear_spring_dashpot_duration_error"],
-                         cost["linear"]["seconds_per_step"] / cost["hertz"]["seconds_per_step"]))
+                         cost["linear"]["cpu_seconds_per_step"] / cost["hertz"]["cpu_seconds_per_step"]))
     if "rolling_friction" in knobs:
         for row in knobs["rolling_friction"]["rows"]:
             rows.append(("rolling resistance", "on" if row["rolling_friction"] else "off", "deceleration",
                          row["deceleration_error"],
-                         row["bed_seconds_per_step"] / knobs["rolling_friction"]["rows"][1]["bed_seconds_per_step"]))
+                         row["bed_cpu_seconds_per_step"] / knobs["rolling_friction"]["rows"][1]["bed_cpu_seconds_per_step"]))
     if "verlet_skin" in knobs:
         section = knobs["verlet_skin"]
-        base = [row for row in section["rows"] if row["skin_radii"] == 0.3][0]["seconds_per_step"]
+        base = [row for row in section["rows"] if row["skin_radii"] == 0.3][0]["cpu_seconds_per_step"]
         for row in section["rows"]:
             rows.append(("Verlet skin", f"{row['skin_radii']} r", "positions [radii]", row["position_difference_radii"],
-                         row["seconds_per_step"] / base))
+                         row["cpu_seconds_per_step"] / base))
     if "fe_element_mesh" in knobs:
         section = knobs["fe_element_mesh"]["rows"]
         base = max(row["solve_seconds"] for row in section)
@@ -668,7 +729,8 @@ def print_summary(results: dict) -> None:
     print(f"\n{'knob':<20} {'setting':<24} {'error measure':<28} {'error':>11} {'cost':>7}")
     for knob, setting, measure, error, cost in summary(results):
         print(f"{knob:<20} {setting:<24} {measure:<28} {error:>+11.3e} {cost:>7.3g}")
-    print("cost: wall time relative to the knob's reference setting (1 rank; ratios from this run only)")
+    print("cost: relative to the knob's reference setting (ratios from this run only): CPU time per step for the "
+          "granular bed (contact model, rolling, skin), wall time otherwise")
 
 
 # ============================================================================= driver
@@ -733,7 +795,7 @@ def parse_arguments(argv=None):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == WORKER_FLAG:
-        ranks_worker(argv[1], int(argv[2]), int(argv[3]), int(argv[4]))
+        ranks_worker(argv[1], int(argv[2]), int(argv[3]), int(argv[4]), [int(mark) for mark in argv[5].split(",") if mark])
         return 0
     args = parse_arguments(argv)
     settings = QUICK if args.quick else FULL
