@@ -190,17 +190,9 @@ def knob_steps_per_contact(settings: dict, log) -> dict:
         log("  N = {:4d}: ".format(steps) + "  ".join(
             f"{key.replace('_spring_dashpot', '').replace('_mindlin', '').replace('_error', '')} {value:+.2%}"
             for key, value in row.items() if key.endswith("_error")) + f"  {row['seconds_per_contact'] * 1e3:.1f} ms/impact")
-    auto = {str(e): derived_steps_per_contact(e) for e in settings["restitutions"]}
+    auto = {str(e): derived.steps_per_contact_required("hertz_mindlin", e) for e in settings["restitutions"]}
     return {"reference": "restitution: the e the scene sets; duration: Hertz's analytic elastic impact",
             "impact_speed": IMPACT_SPEED, "touch_phases": len(phases), "auto_steps_per_contact": auto, "rows": rows}
-
-
-def derived_steps_per_contact(restitution: float) -> float:
-    """The steps per contact `dt: auto` resolves at this restitution (docs/stability.md)."""
-    from pdemfem.contact.restitution import normal_damping_coefficient
-
-    gamma_linear = math.sqrt(6.0 / 5.0) * normal_damping_coefficient("hertz_mindlin", max(restitution, 0.1))
-    return max(30.0, 80.0 * gamma_linear**1.5)
 
 
 def knob_contact_model(settings: dict, bed_costs: dict, log) -> dict:
