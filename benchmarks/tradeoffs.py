@@ -411,6 +411,22 @@ def ranks_worker(path: str, particles: int, pre_steps: int, steps: int, checkpoi
                  summary=json.dumps(dict(run, ranks=MPI.COMM_WORLD.size)))
 
 
+def launch_ranks_worker(command: list, attempts: int = 2) -> None:
+    """Run one rank count's worker; its output is shown when it fails.  A launch that fails is tried once more
+    (said on stderr, with its output): on a machine shared with other MPI jobs a 2-rank launch has been seen to
+    exit 1 without a word (Open MPI's own report is silenced, orte_execute_quiet) while the same command
+    succeeded when repeated."""
+    for attempt in range(1, attempts + 1):
+        completed = subprocess.run(command, cwd=REPOSITORY, env=dict(os.environ, PYTHONPATH=str(REPOSITORY)),
+                                   capture_output=True, text=True)
+        if completed.returncode == 0:
+            return
+        report = (f"{' '.join(command)} exited {completed.returncode} (attempt {attempt} of {attempts})\n"
+                  f"--- stdout\n{completed.stdout}\n--- stderr\n{completed.stderr}")
+        print(report, file=sys.stderr, flush=True)
+    raise RuntimeError(f"the {command[4]}-rank run failed {attempts} times (output above)")
+
+
 def knob_ranks(settings: dict, log) -> dict:
     runs = {}
     with tempfile.TemporaryDirectory(prefix="tradeoffs-ranks-") as scratch:
@@ -420,7 +436,7 @@ def knob_ranks(settings: dict, log) -> dict:
                        str(Path(__file__).resolve()), WORKER_FLAG, path, str(settings["bed_particles"]),
                        str(settings["bed_pre_steps"]), str(settings["bed_steps"]),
                        ",".join(map(str, settings["checkpoints"]))]
-            subprocess.run(command, check=True, cwd=REPOSITORY, env=dict(os.environ, PYTHONPATH=str(REPOSITORY)))
+            launch_ranks_worker(command)
             with np.load(path) as stored:
                 snapshots = {int(key[4:]): stored[key] for key in stored.files if key.startswith("step")}
                 runs[ranks] = dict(json.loads(str(stored["summary"])), snapshots=snapshots,
