@@ -52,9 +52,17 @@ def kernel_cache_directory() -> str | None:
     return directory
 
 
+# What an initialised MPI process leaves in its environment for itself (its PMIx server, its singleton
+# launch): an mpiexec started from it (or from its children) takes them for its own and exits 1 silently.
+INHERITED_MPI_PREFIXES = ("PMIX_", "OMPI_MCA_ess", "OMPI_MCA_pmix", "OMPI_MCA_orte_launch", "OMPI_MCA_orte_ess",
+                          "OMPI_MCA_orte_hnp", "OMPI_COMM_WORLD_", "OMPI_UNIVERSE_SIZE", "OMPI_FILE_LOCATION")
+
+
 def process_environment(base: dict | None = None) -> dict:
-    """The environment a pdemfem process (or an mpiexec launching them) needs."""
-    environment = dict(os.environ if base is None else base)
+    """The environment a pdemfem process (or an mpiexec launching them) needs: the base (os.environ)
+    without what an MPI process already running left for itself, plus pdemfem's settings."""
+    environment = {key: value for key, value in (os.environ if base is None else base).items()
+                   if not key.startswith(INHERITED_MPI_PREFIXES)}
     petsc_dir = find_petsc_dir()
     if petsc_dir and "PETSC_DIR" not in environment:
         environment["PETSC_DIR"] = petsc_dir

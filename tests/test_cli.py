@@ -314,3 +314,16 @@ def test_quiet_run_under_mpi_on_a_terminal_prints_nothing_and_no_escape_codes(wo
     code, printed = _run_on_a_terminal(["run", scene, "-o", workdir / "loud"], workdir)
     assert code == 0 and b"results: " in printed, printed
     assert b"\x1b" not in printed  # the progress bar redraws with \r only: no ANSI escape sequences
+
+
+def test_launch_environment_drops_what_a_running_mpi_process_left():
+    """mpiexec started from a child of an MPI process exits 1 silently when it inherits that process's
+    PMIx/singleton variables: the launch environment leaves them out and keeps everything else."""
+    from pdemfem.runtime import process_environment
+
+    inherited = {"PMIX_RANK": "0", "PMIX_SERVER_URI41": "x", "OMPI_MCA_ess": "singleton",
+                 "OMPI_MCA_orte_launch": "1", "OMPI_COMM_WORLD_SIZE": "1", "PATH": "/usr/bin", "HOME": "/home/user"}
+    environment = process_environment(inherited)
+    assert not [key for key in environment if key.startswith(("PMIX_", "OMPI_MCA_ess", "OMPI_COMM_WORLD_"))]
+    assert "OMPI_MCA_orte_launch" not in environment
+    assert environment["PATH"] == "/usr/bin" and environment["HOME"] == "/home/user"
