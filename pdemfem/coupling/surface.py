@@ -27,7 +27,7 @@ from pdemfem.walls.mesh import TriangleSurface
 
 
 class CoupledSurface(kinds.StateComponent):
-    def __init__(self, solid, material_index: int, smooth_angle: float = 1.0, skin=None):
+    def __init__(self, solid, material_index: int, smooth_angle: float = 1.0, skin=None, anchored: bool = False):
         self.solid = solid
         self.name = solid.name
         contact = solid.contact_surface()
@@ -37,7 +37,8 @@ class CoupledSurface(kinds.StateComponent):
         self.parent_faces = parent_faces_from_split(self.triangles) if self.quadratic else None
         _, positions, velocities = solid.surface_state()
         self.triangle_surface = TriangleSurface(self.name, positions, self.triangles, material_index,
-                                                velocities=velocities, smooth_angle=smooth_angle, skin=skin)
+                                                velocities=velocities, smooth_angle=smooth_angle, skin=skin,
+                                                anchored=anchored)
         self.node_forces = np.zeros((len(self.node_indices), 3))
         # Forces summed over the DEM steps since the last FE advance (sub-cycling).
         self.accumulated_forces = np.zeros_like(self.node_forces)

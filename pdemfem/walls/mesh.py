@@ -132,8 +132,10 @@ class TriangleSurface(ContributorWall):
 
     def __init__(self, name: str, vertices, triangles, material_index: int, velocities=None, patch=None,
                  smooth_angle: float = 1.0, one_sided: bool = False, skin=None, slots: int = DEFAULT_SLOTS,
-                 spread_to_vertices: bool = False):
+                 spread_to_vertices: bool = False, anchored: bool = False, anchor_margin: float = 0.5):
         super().__init__(name)
+        self.anchored = bool(anchored)
+        self.anchor_margin = float(anchor_margin)
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3).copy()
         self.triangles = np.ascontiguousarray(triangles, dtype=np.int32).reshape(-1, 3)
         self.vertex_velocities = (np.zeros_like(self.vertices) if velocities is None
@@ -240,6 +242,8 @@ class TriangleSurface(ContributorWall):
         # Per slot: the contact history, then the last step's overlap (what an opening contact held).
         slot_history = self._field(state, f"wall:{self.name}:history", (self.slots, tables.history_width + 1),
                                    np.float64, 0.0)
+        slot_anchor = (self._field(state, f"wall:{self.name}:anchor", (self.slots, 7), np.float64, -1.0)
+                       if self.anchored else np.zeros((0, 1, 7)))
         skin = float(self.skin if self.skin is not None else system.skin)
         if not self._lists_valid(state, first, last, skin):
             self._rebuild_lists(state, first, last, skin, tables.history_width, tables.cohesion_reach)
@@ -251,7 +255,7 @@ class TriangleSurface(ContributorWall):
             first, last, self.candidate_offsets, self.candidate_triangles,
             self.vertices, self.vertex_velocities, self.triangles, self.patch,
             self.vertex_patch_offsets, self.vertex_patches, self.one_sided, self.material_index,
-            slot_patch, slot_history,
+            slot_patch, slot_history, self.anchored, slot_anchor, self.anchor_margin,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition,
             tables.cohesion_reach, system.dt, state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,
