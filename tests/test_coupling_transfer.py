@@ -74,3 +74,23 @@ def test_anchored_contact_restarts_bit_identically(tmp_path):
     _, restarted = run(restart=checkpoint)
     for key in uninterrupted:
         assert np.array_equal(uninterrupted[key], restarted[key]), key
+
+
+def test_check_names_the_anchored_transfer_and_drops_the_energy_warning_with_it(tmp_path):
+    """Past the point-load limit check warns with either transfer; with nearest it names the energy growth and
+    the anchored transfer as a fix, with anchored only the accuracy (the point load's indentation)."""
+    import yaml
+
+    from pdemfem.cli import check_report
+
+    for transfer in ("nearest", "anchored"):
+        scene = resting_scene(32, restitution=1.0)
+        scene["materials"]["steel"]["youngs_modulus"] = 1e6
+        scene["coupling"]["transfer"] = transfer
+        path = tmp_path / f"{transfer}.yaml"
+        path.write_text(yaml.safe_dump(scene))
+        _, warnings = check_report(str(path))
+        point_load = [w for w in warnings if "stiffer than the surface under it" in w]
+        assert len(point_load) == 1, (transfer, warnings)
+        assert ("energy then grows" in point_load[0]) == (transfer == "nearest")
+        assert ("Set coupling.transfer: anchored" in point_load[0]) == (transfer == "nearest")
