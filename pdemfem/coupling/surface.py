@@ -33,7 +33,11 @@ class CoupledSurface(kinds.StateComponent):
         contact = solid.contact_surface()
         self.node_indices = contact.node_indices              # global FE node numbers of the surface nodes
         self.triangles = np.ascontiguousarray(contact.triangles, dtype=np.int64)  # into node_indices
-        self.quadratic = solid.config.element == "P2"
+        # P2 faces are mirrored as four flat triangles.  The nearest transfer spreads a contact over the parent
+        # face's six nodes by the quadratic shape functions; the anchored one by the flat triangle's own
+        # weights, the exact derivative of its gap (which the flat triangle defines) with respect to those
+        # nodes, so that its force field stays conservative (docs/coupling.md).
+        self.quadratic = solid.config.element == "P2" and not anchored
         self.parent_faces = parent_faces_from_split(self.triangles) if self.quadratic else None
         _, positions, velocities = solid.surface_state()
         self.triangle_surface = TriangleSurface(self.name, positions, self.triangles, material_index,
