@@ -29,6 +29,14 @@ History.  Each particle has K slots per mesh (patch id, xi[3], last overlap) in
 ParticleState.fields, so the tangential spring follows the patch, not the
 triangle: rolling across triangles of one patch carries it on unchanged.
 
+Anchored contacts (anchored=True, coupled solids with coupling.transfer: anchored).  A contact keeps the
+triangle, barycentric weights w0 and normal n0 of its first touch in a per-slot anchor (triangle, w0[3],
+n0[3]); its gap is n0 . (p - sum w0_k x_k), linear in the particle and vertex positions, so its forces are
+the exact gradient of one potential even where the nearest point would jump between the facets of a dimple
+(docs/coupling.md, "Where the contact acts").  The anchor moves to the nearest point when the particle's
+foot p - gap n0 leaves the triangle by more than `anchor_margin` (barycentric units), when the gap leaves
+(0, reach), and when the contact opens.
+
 Force reporting.  Every contact is recorded with its triangle, the barycentric
 weights of the contact point and the force on the wall, and (optionally) the
 force is spread onto the triangle's vertices by those weights, which preserves
@@ -379,13 +387,16 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         slot_patch[i, s] = patch
                         break
             history = slot_history[i]
+            own_slot = slot >= 0
             if slot < 0:
-                # More simultaneous contacts than slots: this one runs without history.
+                # More simultaneous contacts than slots: this one runs without history (and without anchor).
                 history = spare_history
                 for column in range(overlap_column + 1):
                     spare_history[0, column] = 0.0
                 slot = 0
-            if anchored and history is not spare_history:
+            if anchored and own_slot:
+                # Anchored contact: the triangle, weights and normal of first touch while the particle's foot
+                # stays on that triangle (module docstring); else (re)anchor at the nearest point.
                 if slot_anchor[i, slot, 0] >= 0.0:
                     anchored_triangle = int(slot_anchor[i, slot, 0])
                     gap, refresh = anchor_gap(px, py, pz, vertices, triangles, anchored_triangle,
