@@ -27,6 +27,7 @@ def energy_excursion(tmp_path, transfer, cells=16, end=0.4, element="P1"):
     scene["materials"]["steel"]["youngs_modulus"] = 1e6
     scene["coupling"]["transfer"] = transfer
     sim = Simulation.from_dict(scene, output_dir=str(tmp_path / transfer))
+    assert sim.coupling.fem_substeps["block"] == 1  # LevelEnergy is the scheme's exact invariant only then
     level = LevelEnergy(sim)
     start = level.update()
     excursion = 0.0
