@@ -34,8 +34,9 @@ triangle, barycentric weights w0 and normal n0 of its first touch in a per-slot 
 n0[3]); its gap is n0 . (p - sum w0_k x_k), linear in the particle and vertex positions, so its forces are
 the exact gradient of one potential even where the nearest point would jump between the facets of a dimple
 (docs/coupling.md, "Where the contact acts").  The anchor moves to the nearest point when the particle's
-foot p - gap n0 leaves the triangle by more than `anchor_margin` (barycentric units), when the gap leaves
-(0, reach), and when the contact opens.
+foot p - gap n0 leaves the triangle by more than `anchor_margin` (barycentric units) across an edge inside
+its patch, by any amount across the patch's boundary (`anchor_gap`), when the gap leaves (0, reach), and
+when the contact opens.
 
 Force reporting.  Every contact is recorded with its triangle, the barycentric
 weights of the contact point and the force on the wall, and (optionally) the
@@ -139,9 +140,12 @@ def _vertex_in_patch(vertex, patch, vertex_patch_offsets, vertex_patches):
 
 
 @njit(cache=True)
-def anchor_gap(px, py, pz, vertices, triangles, t, anchor, margin):
+def anchor_gap(px, py, pz, vertices, triangles, edge_neighbours, t, anchor, margin):
     """Gap n0 . (p - q0) of an anchored contact (q0 = sum w0_k x_k on triangle t, n0 frozen) and whether
-    the particle's foot p - gap n0 has left the triangle by more than `margin` (in barycentric units)."""
+    the particle's foot p - gap n0 has left the triangle: by more than `margin` (barycentric units) across an
+    edge shared with a triangle of the same patch (a dimple's facets, where a refresh would chatter), by any
+    amount across an edge of the patch's boundary (a rim or convex edge: the anchor's plane must not carry the
+    particle beyond it, and the nearest point there continues the gap)."""
     a = triangles[t, 0]
     b = triangles[t, 1]
     c = triangles[t, 2]
@@ -173,7 +177,11 @@ def anchor_gap(px, py, pz, vertices, triangles, t, anchor, margin):
     v = (d22 * d1f - d12 * d2f) / determinant
     w = (d11 * d2f - d12 * d1f) / determinant
     u = 1.0 - v - w
-    refresh = u < -margin or v < -margin or w < -margin
+    # u < 0: beyond edge bc (column 1), v < 0: beyond ca (column 2), w < 0: beyond ab (column 0).
+    refresh = ((u < 0.0 and edge_neighbours[t, 1] < 0) or (v < 0.0 and edge_neighbours[t, 2] < 0) or
+               (w < 0.0 and edge_neighbours[t, 0] < 0))
+    # The foot moved from the anchor by more than `margin` of the triangle.
+    refresh = refresh or abs(u - anchor[1]) > margin or abs(v - anchor[2]) > margin or abs(w - anchor[3]) > margin
     return gap, refresh
 
 
@@ -181,7 +189,7 @@ def anchor_gap(px, py, pz, vertices, triangles, t, anchor, margin):
 def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         vertices, vertex_velocities, triangles, triangle_patch,
                         vertex_patch_offsets, vertex_patches, one_sided, wall_material,
-                        slot_patch, slot_history, anchored, slot_anchor, anchor_margin,
+                        slot_patch, slot_history, anchored, slot_anchor, anchor_margin, edge_neighbours,
                         positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
                         coefficients, composition, cohesion_reach, dt,
                         forces, torques, totals, spread_to_vertices, vertex_forces,
@@ -399,7 +407,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 # stays on that triangle (module docstring); else (re)anchor at the nearest point.
                 if slot_anchor[i, slot, 0] >= 0.0:
                     anchored_triangle = int(slot_anchor[i, slot, 0])
-                    gap, refresh = anchor_gap(px, py, pz, vertices, triangles, anchored_triangle,
+                    gap, refresh = anchor_gap(px, py, pz, vertices, triangles, edge_neighbours, anchored_triangle,
                                               slot_anchor[i, slot], anchor_margin)
                     if not refresh and 0.0 < gap < reach:
                         t = anchored_triangle
