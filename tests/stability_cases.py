@@ -89,7 +89,8 @@ class LevelEnergy:
     so sim.energies() adds its energies a step late or early and, while the sphere and the block exchange
     energy, swings by ~dt x the exchanged power.  Here the solid's part is the central-difference invariant at
     t^{n+1}: 1/2 v^{n+1/2} M v^{n+3/2} + 1/2 u^{n+1} K u^{n+1} - b . u^{n+1} (u^{n+1}, v^{n+1/2} kept from the
-    previous call, so call `update` after every step), the particles' part is sim.energies()' own.  Exact only
+    previous call, so call `update` after every step, and take the reference after the first step: at t^0 the
+    velocity before the prime is gone), the particles' part is sim.energies()' own.  Exact only
     when the solid takes one FE step per DEM step (with sub-steps the invariant pairs the velocities of adjacent
     sub-steps, which this does not see)."""
 

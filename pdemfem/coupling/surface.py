@@ -27,22 +27,17 @@ from pdemfem.walls.mesh import TriangleSurface
 
 
 class CoupledSurface(kinds.StateComponent):
-    def __init__(self, solid, material_index: int, smooth_angle: float = 1.0, skin=None, anchored: bool = False):
+    def __init__(self, solid, material_index: int, smooth_angle: float = 1.0, skin=None):
         self.solid = solid
         self.name = solid.name
         contact = solid.contact_surface()
         self.node_indices = contact.node_indices              # global FE node numbers of the surface nodes
         self.triangles = np.ascontiguousarray(contact.triangles, dtype=np.int64)  # into node_indices
-        # P2 faces are mirrored as four flat triangles.  The nearest transfer spreads a contact over the parent
-        # face's six nodes by the quadratic shape functions; the anchored one by the flat triangle's own
-        # weights, the exact derivative of its gap (which the flat triangle defines) with respect to those
-        # nodes, so that its force field stays conservative (docs/coupling.md).
-        self.quadratic = solid.config.element == "P2" and not anchored
+        self.quadratic = solid.config.element == "P2"
         self.parent_faces = parent_faces_from_split(self.triangles) if self.quadratic else None
         _, positions, velocities = solid.surface_state()
         self.triangle_surface = TriangleSurface(self.name, positions, self.triangles, material_index,
-                                                velocities=velocities, smooth_angle=smooth_angle, skin=skin,
-                                                anchored=anchored)
+                                                velocities=velocities, smooth_angle=smooth_angle, skin=skin)
         self.node_forces = np.zeros((len(self.node_indices), 3))
         # Forces summed over the DEM steps since the last FE advance (sub-cycling).
         self.accumulated_forces = np.zeros_like(self.node_forces)

@@ -284,11 +284,6 @@ class CouplingConfig(StrictModel):
                                 "contact law holds the solid's local Hertz deformation; right when the mesh is "
                                 "coarser than the contact radius), particle = the particle's only (the FE mesh "
                                 "supplies the solid's deformation; docs/coupling.md)")
-    transfer: Literal["nearest", "anchored"] = Field(
-        "nearest", description="where a particle-solid contact acts: nearest = the surface point nearest the "
-                               "particle each step; anchored = the point and normal of first touch, carried by "
-                               "the surface until the particle leaves that triangle (stable on surfaces that "
-                               "dimple under the contact; docs/coupling.md)")
 
 
 class Scene(StrictModel):

@@ -127,38 +127,13 @@ def vertex_patch_table(triangles, patch, vertex_count: int):
     return np.cumsum(offsets), np.ascontiguousarray(pairs[:, 1], dtype=np.int32)
 
 
-def same_patch_edge_neighbours(triangles, patch) -> np.ndarray:
-    """(n, 3): the triangle across edge ab, bc, ca of each triangle within its patch, -1 on the patch's boundary."""
-    triangles = np.asarray(triangles, dtype=np.int64)
-    count = len(triangles)
-    first = triangles
-    second = np.roll(triangles, -1, axis=1)          # columns: ab, bc, ca
-    keys = np.stack([np.minimum(first, second), np.maximum(first, second)], axis=2).reshape(-1, 2)
-    owner = np.repeat(np.arange(count), 3)
-    order = np.lexsort((owner, keys[:, 1], keys[:, 0]))
-    neighbours = np.full(3 * count, -1, dtype=np.int32)
-    sorted_keys = keys[order]
-    same = np.all(sorted_keys[1:] == sorted_keys[:-1], axis=1)
-    # An edge shared by exactly two triangles (a manifold edge) of one patch.
-    for k in np.flatnonzero(same):
-        left, right = order[k], order[k + 1]
-        if (k + 2 < len(order) and same[k + 1]) or (k > 0 and same[k - 1]):
-            continue
-        if patch[owner[left]] == patch[owner[right]]:
-            neighbours[left] = owner[right]
-            neighbours[right] = owner[left]
-    return neighbours.reshape(count, 3)
-
-
 class TriangleSurface(ContributorWall):
     """Triangles the particles touch; vertices may move every step (see module docstring)."""
 
     def __init__(self, name: str, vertices, triangles, material_index: int, velocities=None, patch=None,
                  smooth_angle: float = 1.0, one_sided: bool = False, skin=None, slots: int = DEFAULT_SLOTS,
-                 spread_to_vertices: bool = False, anchored: bool = False, anchor_margin: float = float(__import__('os').environ.get('PDEMFEM_ANCHOR_MARGIN', '0.1'))):
+                 spread_to_vertices: bool = False):
         super().__init__(name)
-        self.anchored = bool(anchored)
-        self.anchor_margin = float(anchor_margin)
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3).copy()
         self.triangles = np.ascontiguousarray(triangles, dtype=np.int32).reshape(-1, 3)
         self.vertex_velocities = (np.zeros_like(self.vertices) if velocities is None
@@ -168,8 +143,6 @@ class TriangleSurface(ContributorWall):
                       else np.ascontiguousarray(patch, dtype=np.int32))
         self.vertex_patch_offsets, self.vertex_patches = vertex_patch_table(self.triangles, self.patch,
                                                                              len(self.vertices))
-        self.edge_neighbours = (same_patch_edge_neighbours(self.triangles, self.patch) if self.anchored
-                                else np.zeros((0, 3), dtype=np.int32))
         self.one_sided = bool(one_sided)
         self.skin = skin
         self.slots = int(slots)
@@ -267,8 +240,6 @@ class TriangleSurface(ContributorWall):
         # Per slot: the contact history, then the last step's overlap (what an opening contact held).
         slot_history = self._field(state, f"wall:{self.name}:history", (self.slots, tables.history_width + 1),
                                    np.float64, 0.0)
-        slot_anchor = (self._field(state, f"wall:{self.name}:anchor", (self.slots, 7), np.float64, -1.0)
-                       if self.anchored else np.zeros((0, 1, 7)))
         skin = float(self.skin if self.skin is not None else system.skin)
         if not self._lists_valid(state, first, last, skin):
             self._rebuild_lists(state, first, last, skin, tables.history_width, tables.cohesion_reach)
@@ -280,7 +251,7 @@ class TriangleSurface(ContributorWall):
             first, last, self.candidate_offsets, self.candidate_triangles,
             self.vertices, self.vertex_velocities, self.triangles, self.patch,
             self.vertex_patch_offsets, self.vertex_patches, self.one_sided, self.material_index,
-            slot_patch, slot_history, self.anchored, slot_anchor, self.anchor_margin, self.edge_neighbours,
+            slot_patch, slot_history,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition,
             tables.cohesion_reach, system.dt, state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,

@@ -29,15 +29,6 @@ History.  Each particle has K slots per mesh (patch id, xi[3], last overlap) in
 ParticleState.fields, so the tangential spring follows the patch, not the
 triangle: rolling across triangles of one patch carries it on unchanged.
 
-Anchored contacts (anchored=True, coupled solids with coupling.transfer: anchored).  A contact keeps the
-triangle, barycentric weights w0 and normal n0 of its first touch in a per-slot anchor (triangle, w0[3],
-n0[3]); its gap is n0 . (p - sum w0_k x_k), linear in the particle and vertex positions, so its forces are
-the exact gradient of one potential even where the nearest point would jump between the facets of a dimple
-(docs/coupling.md, "Where the contact acts").  The anchor moves to the nearest point when the particle's
-foot p - gap n0 leaves the triangle by more than `anchor_margin` (barycentric units) across an edge inside
-its patch, by any amount across the patch's boundary (`anchor_gap`), when the gap leaves (0, reach), and
-when the contact opens.
-
 Force reporting.  Every contact is recorded with its triangle, the barycentric
 weights of the contact point and the force on the wall, and (optionally) the
 force is spread onto the triangle's vertices by those weights, which preserves
@@ -140,56 +131,10 @@ def _vertex_in_patch(vertex, patch, vertex_patch_offsets, vertex_patches):
 
 
 @njit(cache=True)
-def anchor_gap(px, py, pz, vertices, triangles, edge_neighbours, t, anchor, margin):
-    """Gap n0 . (p - q0) of an anchored contact (q0 = sum w0_k x_k on triangle t, n0 frozen) and whether
-    the particle's foot p - gap n0 has left the triangle: by more than `margin` (barycentric units) across an
-    edge shared with a triangle of the same patch (a dimple's facets, where a refresh would chatter), by any
-    amount across an edge of the patch's boundary (a rim or convex edge: the anchor's plane must not carry the
-    particle beyond it, and the nearest point there continues the gap)."""
-    a = triangles[t, 0]
-    b = triangles[t, 1]
-    c = triangles[t, 2]
-    nx = anchor[4]
-    ny = anchor[5]
-    nz = anchor[6]
-    qx = anchor[1] * vertices[a, 0] + anchor[2] * vertices[b, 0] + anchor[3] * vertices[c, 0]
-    qy = anchor[1] * vertices[a, 1] + anchor[2] * vertices[b, 1] + anchor[3] * vertices[c, 1]
-    qz = anchor[1] * vertices[a, 2] + anchor[2] * vertices[b, 2] + anchor[3] * vertices[c, 2]
-    gap = (px - qx) * nx + (py - qy) * ny + (pz - qz) * nz
-    # Foot of the particle on the anchor's plane, in the triangle's barycentric coordinates.
-    fx = px - gap * nx - vertices[a, 0]
-    fy = py - gap * ny - vertices[a, 1]
-    fz = pz - gap * nz - vertices[a, 2]
-    e1x = vertices[b, 0] - vertices[a, 0]
-    e1y = vertices[b, 1] - vertices[a, 1]
-    e1z = vertices[b, 2] - vertices[a, 2]
-    e2x = vertices[c, 0] - vertices[a, 0]
-    e2y = vertices[c, 1] - vertices[a, 1]
-    e2z = vertices[c, 2] - vertices[a, 2]
-    d11 = e1x * e1x + e1y * e1y + e1z * e1z
-    d12 = e1x * e2x + e1y * e2y + e1z * e2z
-    d22 = e2x * e2x + e2y * e2y + e2z * e2z
-    d1f = e1x * fx + e1y * fy + e1z * fz
-    d2f = e2x * fx + e2y * fy + e2z * fz
-    determinant = d11 * d22 - d12 * d12
-    if determinant <= 0.0:
-        return gap, True
-    v = (d22 * d1f - d12 * d2f) / determinant
-    w = (d11 * d2f - d12 * d1f) / determinant
-    u = 1.0 - v - w
-    # u < 0: beyond edge bc (column 1), v < 0: beyond ca (column 2), w < 0: beyond ab (column 0).
-    refresh = ((u < 0.0 and edge_neighbours[t, 1] < 0) or (v < 0.0 and edge_neighbours[t, 2] < 0) or
-               (w < 0.0 and edge_neighbours[t, 0] < 0))
-    # The foot moved from the anchor by more than `margin` of the triangle.
-    refresh = refresh or abs(u - anchor[1]) > margin or abs(v - anchor[2]) > margin or abs(w - anchor[3]) > margin
-    return gap, refresh
-
-
-@njit(cache=True)
 def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         vertices, vertex_velocities, triangles, triangle_patch,
                         vertex_patch_offsets, vertex_patches, one_sided, wall_material,
-                        slot_patch, slot_history, anchored, slot_anchor, anchor_margin, edge_neighbours,
+                        slot_patch, slot_history,
                         positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
                         coefficients, composition, cohesion_reach, dt,
                         forces, torques, totals, spread_to_vertices, vertex_forces,
@@ -368,8 +313,6 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 slot_patch[i, s] = -1
                 for column in range(overlap_column + 1):
                     slot_history[i, s, column] = 0.0
-                if anchored:
-                    slot_anchor[i, s, 0] = -1.0
 
         for j in range(proposals):
             if scratch_float[j, 7] != 1.0:
@@ -395,39 +338,12 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         slot_patch[i, s] = patch
                         break
             history = slot_history[i]
-            own_slot = slot >= 0
             if slot < 0:
-                # More simultaneous contacts than slots: this one runs without history (and without anchor).
+                # More simultaneous contacts than slots: this one runs without history.
                 history = spare_history
                 for column in range(overlap_column + 1):
                     spare_history[0, column] = 0.0
                 slot = 0
-            if anchored and own_slot:
-                # Anchored contact: the triangle, weights and normal of first touch while the particle's foot
-                # stays on that triangle (module docstring); else (re)anchor at the nearest point.
-                if slot_anchor[i, slot, 0] >= 0.0:
-                    anchored_triangle = int(slot_anchor[i, slot, 0])
-                    gap, refresh = anchor_gap(px, py, pz, vertices, triangles, edge_neighbours, anchored_triangle,
-                                              slot_anchor[i, slot], anchor_margin)
-                    if not refresh and 0.0 < gap < reach:
-                        t = anchored_triangle
-                        distance = gap
-                        wa = slot_anchor[i, slot, 1]
-                        wb = slot_anchor[i, slot, 2]
-                        wc = slot_anchor[i, slot, 3]
-                        nx = slot_anchor[i, slot, 4]
-                        ny = slot_anchor[i, slot, 5]
-                        nz = slot_anchor[i, slot, 6]
-                    else:
-                        slot_anchor[i, slot, 0] = -1.0
-                if slot_anchor[i, slot, 0] < 0.0:
-                    slot_anchor[i, slot, 0] = float(t)
-                    slot_anchor[i, slot, 1] = wa
-                    slot_anchor[i, slot, 2] = wb
-                    slot_anchor[i, slot, 3] = wc
-                    slot_anchor[i, slot, 4] = nx
-                    slot_anchor[i, slot, 5] = ny
-                    slot_anchor[i, slot, 6] = nz
             a = triangles[t, 0]
             b = triangles[t, 1]
             c = triangles[t, 2]
