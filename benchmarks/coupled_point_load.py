@@ -30,8 +30,10 @@ from pdemfem import Simulation  # noqa: E402
 from pdemfem.errors import SolverError  # noqa: E402
 
 
-def run_case(cells: int, element: str, modulus: float, restitution: float, dt: float, end: float, slide: float):
+def run_case(cells: int, element: str, modulus: float, restitution: float, dt: float, end: float, slide: float,
+             transfer: str = "nearest"):
     scene = resting_scene(cells, element=element, restitution=restitution, dt=dt, end=end)
+    scene["coupling"]["transfer"] = transfer
     scene["materials"]["steel"]["youngs_modulus"] = modulus
     if slide:
         scene["particles"][0]["insert"]["positions"][0][0] = 0.3
@@ -68,11 +70,12 @@ def main() -> None:
     parser.add_argument("--dt", type=float, default=2e-4)
     parser.add_argument("--end", type=float, default=1.0)
     parser.add_argument("--slide", type=float, default=0.0, help="initial sliding speed along x [m/s]")
+    parser.add_argument("--transfer", default="nearest", choices=["nearest", "blended"], help="coupling.transfer")
     arguments = parser.parse_args()
     for cells in arguments.cells:
         result = run_case(cells, arguments.element, arguments.modulus, arguments.restitution, arguments.dt,
-                          arguments.end, arguments.slide)
-        print(f"{arguments.element} {cells:>3} cells, E {arguments.modulus:g}, FE sub-steps {result['substeps']}: "
+                          arguments.end, arguments.slide, arguments.transfer)
+        print(f"{arguments.transfer} {arguments.element} {cells:>3} cells, E {arguments.modulus:g}, FE sub-steps {result['substeps']}: "
               f"energy change {result['lowest']:+.3g} .. {result['highest']:+.3g} J (Verlet bound "
               f"{result['bound']:.2g} J); {'; '.join(result['series'])} [{result['seconds']:.0f} s]", flush=True)
 
