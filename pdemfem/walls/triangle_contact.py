@@ -229,9 +229,11 @@ def _clipped_distance_gradient(p, xa, xb, xc, neighbours, out_p, out_a, out_b, o
 @njit(cache=True)
 def blend_overlap(px, py, pz, radius, patch, first, last_k, candidate_triangles, vertices, triangles, triangle_patch,
                   gradient_p, node_scale, vertex_forces, edge_neighbours):
-    """delta = sum_t k(s_t) (R - d_t) / sum_t k(s_t) over the patch's triangles within R (d_t plane distance,
-    s_t point-triangle distance, k = (1 - s^2/R^2)^2); gradient_p <- d delta / d p; when node_scale != 0,
-    vertex_forces[k] += node_scale * d delta / d x_k.  Returns (delta, weight sum)."""
+    """The blended overlap (module docstring): delta = sum_t k(s_t) (R - d_t) / sum_t k(s_t) over the patch's
+    candidate triangles closer than R (s_t the point-triangle distance, k = (1 - s^2/R^2)^2, d_t the distance to
+    the triangle's plane cut at the patch's boundary edges); gradient_p <- d delta / d p; when node_scale != 0,
+    vertex_forces[k] += node_scale * d delta / d x_k.  Two passes: the weighted sum, then (with delta known) the
+    derivatives, whose weight terms carry (R - d_t - delta).  Returns (delta, weight sum)."""
     p = np.array([px, py, pz])
     g_p = np.zeros(3)
     g_a = np.zeros(3)
