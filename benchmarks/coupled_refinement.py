@@ -83,7 +83,7 @@ def effective_modulus(block: dict, modulus: str) -> float:
 
 
 def scene(block: str, element: str = "P1", cells: int = 2, modulus: str = "combined", dt: float = DT,
-          rigid_plane: bool = False, restitution: float = RESTITUTION) -> dict:
+          rigid_plane: bool = False, restitution: float = RESTITUTION, transfer: str = "nearest") -> dict:
     """The impact scene: a clamped n x n x n/2 block (or, rigid_plane, a plane wall at its top)."""
     start = TOP + RADIUS + GAP
     data = {
@@ -94,7 +94,7 @@ def scene(block: str, element: str = "P1", cells: int = 2, modulus: str = "combi
         "particles": [{"name": "ball", "material": "sphere", "radius": RADIUS,
                        "insert": {"kind": "list", "positions": [[0.5, 0.5, start]],
                                   "velocities": [[0.0, 0.0, -math.sqrt(SPEED**2 - 2 * GRAVITY * GAP)]]}}],
-        "coupling": {"fem_every": 1, "contact_modulus": modulus},
+        "coupling": {"fem_every": 1, "contact_modulus": modulus, "transfer": transfer},
         "output": {"particles": [], "solids": []},
     }
     if rigid_plane:
@@ -228,8 +228,9 @@ def reference(block: str, restitution: float = RESTITUTION) -> dict:
     return damped_hertz_impact(effective_modulus(BLOCKS[block], "combined"), restitution=restitution)
 
 
-def run(blocks, elements, cells_list, moduli, dt=DT, restitution=RESTITUTION, log=print) -> dict:
-    results = {"dt": dt, "speed": SPEED, "restitution": restitution, "sphere": SPHERE, "radius": RADIUS,
+def run(blocks, elements, cells_list, moduli, dt=DT, restitution=RESTITUTION, log=print, transfer="nearest") -> dict:
+    results = {"dt": dt, "speed": SPEED, "restitution": restitution, "transfer": transfer, "sphere": SPHERE,
+               "radius": RADIUS,
                "blocks": {name: BLOCKS[name] for name in blocks}, "cases": []}
     with tempfile.TemporaryDirectory() as scratch:
         for block in blocks:
@@ -245,7 +246,8 @@ def run(blocks, elements, cells_list, moduli, dt=DT, restitution=RESTITUTION, lo
                     for cells in cells_list:
                         try:
                             measured = against_reference(measure_impact(
-                                scene(block, element, cells, modulus, dt=dt, restitution=restitution), scratch), ref)
+                                scene(block, element, cells, modulus, dt=dt, restitution=restitution, transfer=transfer), scratch),
+                                ref)
                         except (SolverError, RuntimeError) as error:   # a case that blows up is a result too
                             results["cases"].append(dict(block=block, element=element, cells=cells, modulus=modulus,
                                                          failed=str(error).splitlines()[0]))
@@ -330,12 +332,14 @@ def main(argv=None) -> None:
     parser.add_argument("--moduli", nargs="+", default=["combined", "particle"], choices=["combined", "particle"])
     parser.add_argument("--dt", type=float, default=DT)
     parser.add_argument("--restitution", type=float, default=RESTITUTION)
+    parser.add_argument("--transfer", default="nearest", choices=["nearest", "blended"],
+                        help="coupling.transfer of the block cases (docs/coupling.md)")
     parser.add_argument("--json", type=Path, default=DEFAULT_JSON)
     parser.add_argument("--plot", type=Path, default=None, help="also draw the table (PNG)")
     parser.add_argument("--markdown", action="store_true", help="also print the table as markdown")
     args = parser.parse_args(argv)
     results = run(args.blocks, args.elements, args.cells, args.moduli, dt=args.dt, restitution=args.restitution,
-                  log=lambda line: print(line, flush=True))
+                  log=lambda line: print(line, flush=True), transfer=args.transfer)
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(results, indent=1))
     print(f"wrote {args.json}")

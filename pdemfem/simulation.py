@@ -143,7 +143,8 @@ class Simulation:
         self.contributor_walls = build_contributor_walls(scene.walls, tables.material_names,
                                                          partial(resolve_path, self.base_dir))
         self.coupled_surfaces = [
-            CoupledSurface(self.solids[config.name], tables.surface_row(config.name, config.material))
+            CoupledSurface(self.solids[config.name], tables.surface_row(config.name, config.material),
+                           blended=scene.coupling.transfer == "blended")
             for config in scene.solids if config.contact
         ]
         self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]

@@ -23,8 +23,10 @@ from pdemfem import Simulation
 EPS = np.finfo(float).eps
 
 
-def setup(tmp_path, **options):
-    sim = Simulation.from_dict(free_block_impact(**options), output_dir=str(tmp_path))
+def setup(tmp_path, transfer="nearest", **options):
+    scene = free_block_impact(**options)
+    scene["coupling"]["transfer"] = transfer
+    sim = Simulation.from_dict(scene, output_dir=str(tmp_path))
     solid = sim.solids["block"]
     assert solid.lumped
     mass = solid.lumped_mass.getArray(readonly=True).reshape(-1, 3)  # nodal lumped mass, per dof
@@ -40,14 +42,17 @@ def momenta(sim, solid, mass):
     return particle, block + pending
 
 
-@pytest.mark.parametrize("element, fem_every, offset, tangential, friction", [
-    ("P1", 1, (0.0, 0.0), 0.0, 0.0),
-    ("P1", 3, (0.031, -0.017), 0.4, 0.5),   # off centre and oblique, with friction: the block spins
-    ("P2", 1, (0.031, -0.017), 0.4, 0.5),
+@pytest.mark.parametrize("element, fem_every, offset, tangential, friction, transfer", [
+    ("P1", 1, (0.0, 0.0), 0.0, 0.0, "nearest"),
+    ("P1", 3, (0.031, -0.017), 0.4, 0.5, "nearest"),   # off centre and oblique, with friction: the block spins
+    ("P2", 1, (0.031, -0.017), 0.4, 0.5, "nearest"),
+    ("P1", 3, (0.031, -0.017), 0.4, 0.5, "blended"),   # elastic force spread by the blended gap
+    ("P2", 1, (0.031, -0.017), 0.4, 0.5, "blended"),
 ])
-def test_linear_momentum_conserved_to_round_off(tmp_path, element, fem_every, offset, tangential, friction):
+def test_linear_momentum_conserved_to_round_off(tmp_path, element, fem_every, offset, tangential, friction,
+                                                transfer):
     sim, solid, mass = setup(tmp_path, element=element, fem_every=fem_every, offset=offset, tangential=tangential,
-                             friction=friction, restitution=0.5)
+                             friction=friction, restitution=0.5, transfer=transfer)
     p0 = sum(momenta(sim, solid, mass))
     steps = 500  # 10 ms: approach (2 mm at 1 m/s), the ~3.7 ms contact and separation
     worst, peak, touched = 0.0, 0.0, 0
@@ -77,10 +82,11 @@ def strain_energy(solid, u):
     return 0.5 * y.dot(x)
 
 
-@pytest.mark.parametrize("element", ["P1", "P2"])
-def test_energy_conserved_within_the_verlet_bound(tmp_path, element):
+@pytest.mark.parametrize("element, transfer", [("P1", "nearest"), ("P2", "nearest"), ("P1", "blended"),
+                                               ("P2", "blended")])
+def test_energy_conserved_within_the_verlet_bound(tmp_path, element, transfer):
     dt, speed = 2e-5, 1.0
-    sim, solid, mass = setup(tmp_path, element=element, dt=dt, speed=speed)
+    sim, solid, mass = setup(tmp_path, element=element, dt=dt, speed=speed, transfer=transfer)
     lumped = mass.ravel()
     state = sim.particle_system.state
     m = float(state.mass[0])

@@ -99,12 +99,16 @@ def _contact_figures(scene, config, solid, interval: float, warnings, limits=Non
         return lines
     if compliance > POINT_LOAD_LIMIT:
         coarsest = stiffness / (POINT_LOAD_LIMIT * solid_material.youngs_modulus)
+        # With coupling.transfer blended the dimpled surface no longer feeds energy in (docs/coupling.md): the
+        # surface's indentation under the contact then limits the contact's accuracy, not the run's stability.
+        consequence = ("its force reaches the solid as a point load on one triangle's nodes, which a mesh this fine "
+                       "does not resolve; the coupled energy then grows with refinement (docs/coupling.md).  Set "
+                       "coupling.transfer: blended, or use" if scene.coupling.transfer == "nearest" else
+                       "the surface's indentation under it adds to the contact's compliance (docs/coupling.md).  Use")
         warnings.append(
             f"solid {config.name}: a contact of group {name} is stiffer than the surface under it "
-            f"(S_n/(E l) = {compliance:.3g} > {POINT_LOAD_LIMIT:g}): its force reaches the solid as a point load on "
-            f"one triangle's nodes, which a mesh this fine does not resolve; the coupled energy then grows with "
-            f"refinement (docs/coupling.md).  Use surface elements of at least {coarsest:.3g} m there, or a "
-            f"stiffer solid material")
+            f"(S_n/(E l) = {compliance:.3g} > {POINT_LOAD_LIMIT:g}): {consequence} surface elements of at least "
+            f"{coarsest:.3g} m there, or a stiffer solid material")
     if held > HELD_FORCE_LIMIT and compliance > SURFACE_COMPLIANCE_LIMIT:
         dt = interval / scene.coupling.fem_every
         action = (f"run lowers fem_every to {math.floor(held_limit / dt)}" if dt <= held_limit else

@@ -27,7 +27,7 @@ from pdemfem.walls.mesh import TriangleSurface
 
 
 class CoupledSurface(kinds.StateComponent):
-    def __init__(self, solid, material_index: int, smooth_angle: float = 1.0, skin=None):
+    def __init__(self, solid, material_index: int, smooth_angle: float = 1.0, skin=None, blended: bool = False):
         self.solid = solid
         self.name = solid.name
         contact = solid.contact_surface()
@@ -37,7 +37,8 @@ class CoupledSurface(kinds.StateComponent):
         self.parent_faces = parent_faces_from_split(self.triangles) if self.quadratic else None
         _, positions, velocities = solid.surface_state()
         self.triangle_surface = TriangleSurface(self.name, positions, self.triangles, material_index,
-                                                velocities=velocities, smooth_angle=smooth_angle, skin=skin)
+                                                velocities=velocities, smooth_angle=smooth_angle, skin=skin,
+                                                blended=blended)
         self.node_forces = np.zeros((len(self.node_indices), 3))
         # Forces summed over the DEM steps since the last FE advance (sub-cycling).
         self.accumulated_forces = np.zeros_like(self.node_forces)
@@ -64,6 +65,9 @@ class CoupledSurface(kinds.StateComponent):
                                  contacts.weights, contacts.force, self.node_forces)
             else:
                 spread_linear(self.triangles, contacts.triangle, contacts.weights, contacts.force, self.node_forces)
+        if self.triangle_surface.blended:
+            # The contacts' normal elastic forces, spread over the nodes under the particle by the blended gap.
+            self.node_forces += self.triangle_surface.vertex_forces
         self.accumulated_forces += self.node_forces
 
     def send_forces_to_solid(self, scale: float, dampers: bool = True) -> None:

@@ -127,12 +127,35 @@ def vertex_patch_table(triangles, patch, vertex_count: int):
     return np.cumsum(offsets), np.ascontiguousarray(pairs[:, 1], dtype=np.int32)
 
 
+def same_patch_edge_neighbours(triangles, patch) -> np.ndarray:
+    """(n, 3): the triangle across edge ab, bc, ca of each triangle within its patch, -1 on the patch's boundary."""
+    triangles = np.asarray(triangles, dtype=np.int64)
+    count = len(triangles)
+    first = triangles
+    second = np.roll(triangles, -1, axis=1)          # columns: ab, bc, ca
+    keys = np.stack([np.minimum(first, second), np.maximum(first, second)], axis=2).reshape(-1, 2)
+    owner = np.repeat(np.arange(count), 3)
+    order = np.lexsort((owner, keys[:, 1], keys[:, 0]))
+    neighbours = np.full(3 * count, -1, dtype=np.int32)
+    sorted_keys = keys[order]
+    same = np.all(sorted_keys[1:] == sorted_keys[:-1], axis=1)
+    # An edge shared by exactly two triangles (a manifold edge) of one patch.
+    for k in np.flatnonzero(same):
+        left, right = order[k], order[k + 1]
+        if (k + 2 < len(order) and same[k + 1]) or (k > 0 and same[k - 1]):
+            continue
+        if patch[owner[left]] == patch[owner[right]]:
+            neighbours[left] = owner[right]
+            neighbours[right] = owner[left]
+    return neighbours.reshape(count, 3)
+
+
 class TriangleSurface(ContributorWall):
     """Triangles the particles touch; vertices may move every step (see module docstring)."""
 
     def __init__(self, name: str, vertices, triangles, material_index: int, velocities=None, patch=None,
                  smooth_angle: float = 1.0, one_sided: bool = False, skin=None, slots: int = DEFAULT_SLOTS,
-                 spread_to_vertices: bool = False):
+                 spread_to_vertices: bool = False, blended: bool = False):
         super().__init__(name)
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3).copy()
         self.triangles = np.ascontiguousarray(triangles, dtype=np.int32).reshape(-1, 3)
@@ -144,6 +167,11 @@ class TriangleSurface(ContributorWall):
         self.vertex_patch_offsets, self.vertex_patches = vertex_patch_table(self.triangles, self.patch,
                                                                              len(self.vertices))
         self.one_sided = bool(one_sided)
+        # Blended contact gap (pdemfem.walls.triangle_contact): its elastic nodal forces land in vertex_forces.
+        self.blended = bool(blended)
+        self.edge_neighbours = (same_patch_edge_neighbours(self.triangles, self.patch) if self.blended
+                                else np.zeros((0, 3), dtype=np.int32))
+        self._blend_gradient = np.zeros(3)
         self.skin = skin
         self.slots = int(slots)
         self.spread_to_vertices = bool(spread_to_vertices)
@@ -244,14 +272,14 @@ class TriangleSurface(ContributorWall):
         if not self._lists_valid(state, first, last, skin):
             self._rebuild_lists(state, first, last, skin, tables.history_width, tables.cohesion_reach)
         self.totals[:] = 0.0
-        if self.spread_to_vertices:
+        if self.spread_to_vertices or self.blended:
             self.vertex_forces[:] = 0.0
         records = self._records
         elastic, dissipated, contacts, work = mesh_contact_forces(
             first, last, self.candidate_offsets, self.candidate_triangles,
             self.vertices, self.vertex_velocities, self.triangles, self.patch,
             self.vertex_patch_offsets, self.vertex_patches, self.one_sided, self.material_index,
-            slot_patch, slot_history,
+            slot_patch, slot_history, self.blended, self._blend_gradient, self.edge_neighbours,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition,
             tables.cohesion_reach, system.dt, state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,

@@ -29,6 +29,15 @@ History.  Each particle has K slots per mesh (patch id, xi[3], last overlap) in
 ParticleState.fields, so the tangential spring follows the patch, not the
 triangle: rolling across triangles of one patch carries it on unchanged.
 
+Blended gap (blended=True: coupled solids with coupling.transfer: blended).  The overlap is a smooth blend
+of the patch's facets under the sphere, delta = sum_t k(s_t) (R - d_t) / sum_t k(s_t) over the triangles
+closer than R (s_t the point-triangle distance, k = (1 - s^2/R^2)^2, d_t the distance to the triangle's
+plane, cut at the patch's boundary edges), so that a flat patch gives the plane exactly and a dimpled one a
+gap whose gradient does not jump when the nearest facet changes.  The normal elastic force acts as the exact
+gradient of that potential: f |grad_p delta| along n = -grad_p delta / |grad_p delta| on the particle and
+-f d delta / d x_k on every node of those triangles (vertex_forces); the dashpot and tangential rest acts at
+the nearest point as before (docs/coupling.md, "Blended contact gap").
+
 Force reporting.  Every contact is recorded with its triangle, the barycentric
 weights of the contact point and the force on the wall, and (optionally) the
 force is spread onto the triangle's vertices by those weights, which preserves
@@ -131,10 +140,169 @@ def _vertex_in_patch(vertex, patch, vertex_patch_offsets, vertex_patches):
 
 
 @njit(cache=True)
+def _plane_distance_gradient(p, xa, xb, xc, out_p, out_a, out_b, out_c):
+    """d = sigma n.(p - a) >= 0 for the plane of abc, and its gradient with respect to p, a, b, c."""
+    e1 = xb - xa
+    e2 = xc - xa
+    r = p - xa
+    N = np.cross(e1, e2)
+    length = math.sqrt(N[0] ** 2 + N[1] ** 2 + N[2] ** 2)
+    n = N / length
+    d = n[0] * r[0] + n[1] * r[1] + n[2] * r[2]
+    sigma = 1.0 if d >= 0.0 else -1.0
+    d_b = (np.cross(e2, r) - d * np.cross(e2, n)) / length
+    d_c = (np.cross(r, e1) - d * np.cross(n, e1)) / length
+    for k in range(3):
+        out_p[k] = sigma * n[k]
+        out_b[k] = sigma * d_b[k]
+        out_c[k] = sigma * d_c[k]
+        out_a[k] = -(out_p[k] + out_b[k] + out_c[k])
+    return sigma * d
+
+
+@njit(cache=True)
+def _clipped_distance_gradient(p, xa, xb, xc, neighbours, out_p, out_a, out_b, out_c):
+    """Distance from p to the triangle's plane cut at its patch-boundary edges (edges without a same-patch
+    neighbour: columns ab, bc, ca), and its gradient.  Inside the interior edges the plane extends (a flat
+    patch stays exact); beyond a rim edge the distance is to that edge's line, or to a rim vertex."""
+    d = _plane_distance_gradient(p, xa, xb, xc, out_p, out_a, out_b, out_c)
+    corners = (xa, xb, xc)
+    n = np.cross(xb - xa, xc - xa)
+    n = n / math.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2)
+    foot = p - (n[0] * (p[0] - xa[0]) + n[1] * (p[1] - xa[1]) + n[2] * (p[2] - xa[2])) * n
+    outside = np.zeros(3, dtype=np.bool_)
+    for e in range(3):
+        if neighbours[e] >= 0:
+            continue
+        u = corners[e]
+        v = corners[(e + 1) % 3]
+        w = corners[(e + 2) % 3]
+        inward = np.cross(n, v - u)
+        if (inward[0] * (w[0] - u[0]) + inward[1] * (w[1] - u[1]) + inward[2] * (w[2] - u[2])) < 0.0:
+            inward = -inward
+        if inward[0] * (foot[0] - u[0]) + inward[1] * (foot[1] - u[1]) + inward[2] * (foot[2] - u[2]) < 0.0:
+            outside[e] = True
+    if not (outside[0] or outside[1] or outside[2]):
+        return d
+    # Nearest point of the clipped plane: on a violated rim edge's line, clamped to rim vertices.
+    best = 1e300
+    best_q = np.zeros(3)
+    best_tau = 0.0
+    best_edge = -1
+    for e in range(3):
+        if neighbours[e] >= 0:
+            continue
+        u = corners[e]
+        v = corners[(e + 1) % 3]
+        edge = v - u
+        tau = ((p[0] - u[0]) * edge[0] + (p[1] - u[1]) * edge[1] + (p[2] - u[2]) * edge[2]) / (
+            edge[0] ** 2 + edge[1] ** 2 + edge[2] ** 2)
+        # Clamp at an end only where the neighbouring edge there is a rim edge too (a rim corner).
+        if tau < 0.0 and neighbours[(e + 2) % 3] < 0:
+            tau = 0.0
+        elif tau > 1.0 and neighbours[(e + 1) % 3] < 0:
+            tau = 1.0
+        q = u + tau * edge
+        distance = math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
+        if outside[e] and distance < best:
+            best = distance
+            best_q = q
+            best_tau = tau
+            best_edge = e
+    if best_edge < 0 or best == 0.0:
+        return d
+    r = (p - best_q) / best
+    gradients = (out_a, out_b, out_c)
+    for k in range(3):
+        out_p[k] = r[k]
+        out_a[k] = 0.0
+        out_b[k] = 0.0
+        out_c[k] = 0.0
+    first_corner = best_edge
+    second_corner = (best_edge + 1) % 3
+    for k in range(3):
+        gradients[first_corner][k] = -(1.0 - best_tau) * r[k]
+        gradients[second_corner][k] = -best_tau * r[k]
+    return best
+
+
+@njit(cache=True)
+def blend_overlap(px, py, pz, radius, patch, first, last_k, candidate_triangles, vertices, triangles, triangle_patch,
+                  gradient_p, node_scale, vertex_forces, edge_neighbours):
+    """The blended overlap (module docstring): delta = sum_t k(s_t) (R - d_t) / sum_t k(s_t) over the patch's
+    candidate triangles closer than R (s_t the point-triangle distance, k = (1 - s^2/R^2)^2, d_t the distance to
+    the triangle's plane cut at the patch's boundary edges); gradient_p <- d delta / d p; when node_scale != 0,
+    vertex_forces[k] += node_scale * d delta / d x_k.  Two passes: the weighted sum, then (with delta known) the
+    derivatives, whose weight terms carry (R - d_t - delta).  Returns (delta, weight sum)."""
+    p = np.array([px, py, pz])
+    g_p = np.zeros(3)
+    g_a = np.zeros(3)
+    g_b = np.zeros(3)
+    g_c = np.zeros(3)
+    total = 0.0
+    weighted = 0.0
+    for k in range(first, last_k):
+        t = candidate_triangles[k]
+        if triangle_patch[t] != patch:
+            continue
+        a = triangles[t, 0]
+        b = triangles[t, 1]
+        c = triangles[t, 2]
+        qx, qy, qz, wa, wb, wc, region = closest_point(px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                                                        vertices[b, 0], vertices[b, 1], vertices[b, 2],
+                                                        vertices[c, 0], vertices[c, 1], vertices[c, 2])
+        s = math.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2)
+        if s >= radius:
+            continue
+        omega = (1.0 - s * s / (radius * radius)) ** 2
+        d = _clipped_distance_gradient(p, vertices[a], vertices[b], vertices[c], edge_neighbours[t], g_p, g_a, g_b,
+                                       g_c)
+        total += omega
+        weighted += omega * (radius - d)
+    if total == 0.0:
+        return 0.0, 0.0
+    delta = weighted / total
+    gradient_p[:] = 0.0
+    for k in range(first, last_k):
+        t = candidate_triangles[k]
+        if triangle_patch[t] != patch:
+            continue
+        a = triangles[t, 0]
+        b = triangles[t, 1]
+        c = triangles[t, 2]
+        qx, qy, qz, wa, wb, wc, region = closest_point(px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                                                        vertices[b, 0], vertices[b, 1], vertices[b, 2],
+                                                        vertices[c, 0], vertices[c, 1], vertices[c, 2])
+        s = math.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2)
+        if s >= radius or s == 0.0:
+            continue
+        omega = (1.0 - s * s / (radius * radius)) ** 2
+        domega = -4.0 * s * (1.0 - s * s / (radius * radius)) / (radius * radius)
+        d = _clipped_distance_gradient(p, vertices[a], vertices[b], vertices[c], edge_neighbours[t], g_p, g_a, g_b,
+                                       g_c)
+        h = radius - d
+        ux = (px - qx) / s
+        uy = (py - qy) / s
+        uz = (pz - qz) / s
+        factor = (h - delta) * domega / total
+        # d s / d p = u ; d s / d x_k = -w_k u
+        gradient_p[0] += (-omega * g_p[0]) / total + factor * ux
+        gradient_p[1] += (-omega * g_p[1]) / total + factor * uy
+        gradient_p[2] += (-omega * g_p[2]) / total + factor * uz
+        if node_scale != 0.0:
+            for axis in range(3):
+                u_axis = ux if axis == 0 else (uy if axis == 1 else uz)
+                vertex_forces[a, axis] += node_scale * ((-omega * g_a[axis]) / total - factor * wa * u_axis)
+                vertex_forces[b, axis] += node_scale * ((-omega * g_b[axis]) / total - factor * wb * u_axis)
+                vertex_forces[c, axis] += node_scale * ((-omega * g_c[axis]) / total - factor * wc * u_axis)
+    return delta, total
+
+
+@njit(cache=True)
 def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         vertices, vertex_velocities, triangles, triangle_patch,
                         vertex_patch_offsets, vertex_patches, one_sided, wall_material,
-                        slot_patch, slot_history,
+                        slot_patch, slot_history, blended, blend_gradient, edge_neighbours,
                         positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
                         coefficients, composition, cohesion_reach, dt,
                         forces, torques, totals, spread_to_vertices, vertex_forces,
@@ -356,9 +524,53 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
             sx = wa * vertex_velocities[a, 0] + wb * vertex_velocities[b, 0] + wc * vertex_velocities[c, 0]
             sy = wa * vertex_velocities[a, 1] + wb * vertex_velocities[b, 1] + wc * vertex_velocities[c, 1]
             sz = wa * vertex_velocities[a, 2] + wb * vertex_velocities[b, 2] + wc * vertex_velocities[c, 2]
+            scale = 1.0
+            blend_applied = False
+            if blended:
+                # The blended gap (module docstring): its normal and overlap; scale = |grad_p delta|.
+                delta, total = blend_overlap(px, py, pz, radius, patch, candidate_offsets[i], candidate_offsets[i + 1],
+                                             candidate_triangles, vertices, triangles, triangle_patch, blend_gradient,
+                                             0.0, vertex_forces, edge_neighbours)
+                norm = math.sqrt(blend_gradient[0] ** 2 + blend_gradient[1] ** 2 + blend_gradient[2] ** 2)
+                if total > 0.0 and norm > 0.0 and delta > 0.0:
+                    nx = -blend_gradient[0] / norm
+                    ny = -blend_gradient[1] / norm
+                    nz = -blend_gradient[2] / norm
+                    distance = radius - delta
+                    scale = norm
+                    blend_applied = True
             fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = rigid_wall_contact(
                 composition, i, nx, ny, nz, distance, sx, sy, sz, wall_material, history, slot, velocities,
                 angular_velocities, radii, mass, inverse_inertia, material_index, coefficients, dt, forces, torques)
+            if blend_applied:
+                # Split the force: the normal elastic part f_el n acts as the blended potential's gradient (on the
+                # particle f_el |grad delta| n, on the nodes -f_el d delta/d x_k); the dashpot and tangential
+                # rest stays a point force on the nearest triangle (records, dampers.py).  The normal dashpot is
+                # -c_n (v - s).n (the contact point's rotation adds nothing along n).
+                approach = ((velocities[i, 0] - sx) * nx + (velocities[i, 1] - sy) * ny
+                            + (velocities[i, 2] - sz) * nz)
+                normal_elastic_force = fx * nx + fy * ny + fz * nz + normal_damping * approach
+                extra = (scale - 1.0) * normal_elastic_force
+                forces[i, 0] += extra * nx
+                forces[i, 1] += extra * ny
+                forces[i, 2] += extra * nz
+                blend_overlap(px, py, pz, radius, patch, candidate_offsets[i], candidate_offsets[i + 1],
+                              candidate_triangles, vertices, triangles, triangle_patch, blend_gradient,
+                              -normal_elastic_force, vertex_forces, edge_neighbours)
+                # The wall's total force (totals, records' sum) is the particle's; the records carry the rest.
+                elastic_x = scale * normal_elastic_force * nx
+                elastic_y = scale * normal_elastic_force * ny
+                elastic_z = scale * normal_elastic_force * nz
+                totals[0] -= elastic_x
+                totals[1] -= elastic_y
+                totals[2] -= elastic_z
+                # Its moment taken at the nearest point (the nodal forces' own moment differs by the spread).
+                totals[3] -= qy * elastic_z - qz * elastic_y
+                totals[4] -= qz * elastic_x - qx * elastic_z
+                totals[5] -= qx * elastic_y - qy * elastic_x
+                fx -= normal_elastic_force * nx
+                fy -= normal_elastic_force * ny
+                fz -= normal_elastic_force * nz
             history[slot, overlap_column] = radius - distance  # this step's overlap
             elastic_total += elastic
             dissipated_total += dissipated
