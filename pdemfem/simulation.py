@@ -16,7 +16,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem.contact.tables import build_contact_tables
-from pdemfem.coupling.check import coupling_assessment
+from pdemfem.coupling.check import blended_transfer, coupling_assessment
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
 from pdemfem.errors import SceneError, SolverError
@@ -57,12 +57,13 @@ class Simulation:
         self.dt = float(derived.time_step(scene, solid_critical_step=solid_step))
         self.time = 0.0
         self.step_count = 0
+        # The coupled-stability warnings of `pdemfem check` (collective): run prints them, the monitor names them;
+        # with coupling.transfer auto the solids a point load dimples get the blended gap.
+        self.coupling_warnings, interval_limit, self.point_loaded_solids = (
+            coupling_assessment(scene, self.solids, self.dt) if self.solids else ([], math.inf, set()))
         self.particle_system = self._build_particles()
         for surface in self.coupled_surfaces:
             surface.particle_system = self.particle_system
-        # The coupled-stability warnings of `pdemfem check` (collective): run prints them, the monitor names them.
-        self.coupling_warnings, interval_limit = (coupling_assessment(scene, self.solids, self.dt) if self.solids
-                                                  else ([], math.inf))
         self.fem_every = self._allowed_fem_every(interval_limit)
         self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt, fem_every=self.fem_every,
                                        comm=self.comm)
@@ -144,7 +145,7 @@ class Simulation:
                                                          partial(resolve_path, self.base_dir))
         self.coupled_surfaces = [
             CoupledSurface(self.solids[config.name], tables.surface_row(config.name, config.material),
-                           blended=scene.coupling.transfer == "blended")
+                           blended=blended_transfer(scene, config.name, self.point_loaded_solids))
             for config in scene.solids if config.contact
         ]
         self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]

@@ -93,7 +93,8 @@ def test_point_load_limit_warns_in_check_and_names_the_cause_when_run_diverges(t
     """A heavy sphere on a very soft block (E = 1e6, 32 cells): the contact (S_n/(E l) = 5) is far stiffer
     than the surface under it, its force lands on one triangle's nodes as a point load and the coupled
     energy grows with refinement (measured at e = 1, 1 s: 4 cells -0.01 J, 16 cells +56 J, 32 cells
-    diverges).  check warns (the steel block does not); run stops with exit 3 and names it."""
+    diverges).  check warns (the steel block does not); with the nearest-point gap run stops with exit 3 and
+    names it (the default, coupling.transfer auto, blends the gap for this block: tests/test_coupling_transfer.py)."""
     import yaml
 
     from pdemfem import cli
@@ -102,6 +103,7 @@ def test_point_load_limit_warns_in_check_and_names_the_cause_when_run_diverges(t
     soft = resting_scene(32, restitution=1.0, end=1.0)
     soft["materials"]["steel"]["youngs_modulus"] = 1e6
     soft["output"] = {"every": 0.05}
+    soft["coupling"]["transfer"] = "nearest"
     for name, scene, expected in (("soft", soft, 1), ("steel", resting_scene(32), 0)):
         path = tmp_path / f"{name}.yaml"
         path.write_text(yaml.safe_dump(scene))

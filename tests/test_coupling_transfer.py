@@ -100,11 +100,22 @@ def test_check_names_the_blended_gap_and_drops_the_energy_warning_with_it(tmp_pa
 
     from pdemfem.cli import check_report
 
-    for transfer in ("nearest", "blended"):
+    for transfer in ("nearest", "blended", "auto"):
         path = tmp_path / f"{transfer}.yaml"
         path.write_text(yaml.safe_dump(soft_scene(32, transfer, 1.0)))
         _, warnings = check_report(str(path))
         point_load = [w for w in warnings if "stiffer than the surface under it" in w]
         assert len(point_load) == 1, (transfer, warnings)
         assert ("energy then grows" in point_load[0]) == (transfer == "nearest")
-        assert ("Set coupling.transfer: blended" in point_load[0]) == (transfer == "nearest")
+        assert ("Set coupling.transfer: auto or blended" in point_load[0]) == (transfer == "nearest")
+        assert ("auto chose it" in point_load[0]) == (transfer == "auto")
+
+
+def test_auto_transfer_blends_only_the_solids_a_point_load_dimples(tmp_path):
+    """coupling.transfer auto (the default): the soft block past the point-load limit gets the blended gap,
+    a steel block of the same mesh keeps the nearest-point gap."""
+    for modulus, blended in ((1.0e6, True), (2.0e10, False)):
+        scene = soft_scene(16, "auto", 1e-3)
+        scene["materials"]["steel"]["youngs_modulus"] = modulus
+        sim = Simulation.from_dict(scene, output_dir=tmp_path / f"{modulus:g}")
+        assert sim.coupled_surfaces[0].triangle_surface.blended is blended

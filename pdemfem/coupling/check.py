@@ -47,9 +47,17 @@ def coupling_report(scene, base_dir, dt: float, comm=None, warnings=None) -> lis
     return lines
 
 
-def _contact_figures(scene, config, solid, interval: float, warnings, limits=None) -> list:
+def blended_transfer(scene, solid_name: str, point_loaded: set) -> bool:
+    """Whether a solid's contact surface uses the blended gap: coupling.transfer blended, or auto and the
+    surface yields to a point load (`point_loaded`: the solids past POINT_LOAD_LIMIT)."""
+    transfer = scene.coupling.transfer
+    return transfer == "blended" or (transfer == "auto" and solid_name in point_loaded)
+
+
+def _contact_figures(scene, config, solid, interval: float, warnings, limits=None, point_loaded=None) -> list:
     """Per solid: the stiffest particle contact (impact or resting under its weight) against the lightest
-    surface node and the surface element size; appends the warnings."""
+    surface node and the surface element size; appends the warnings; adds the solid's name to
+    `point_loaded` when the contact is stiffer than the surface under it (S_n/(E l) > POINT_LOAD_LIMIT)."""
     from pdemfem.contact.restitution import normal_damping_coefficient
     from pdemfem.scene import derived
 
@@ -97,14 +105,21 @@ def _contact_figures(scene, config, solid, interval: float, warnings, limits=Non
         limits[config.name] = held_limit
     if warnings is None:
         return lines
+    if compliance > POINT_LOAD_LIMIT and point_loaded is not None:
+        point_loaded.add(config.name)
     if compliance > POINT_LOAD_LIMIT:
         coarsest = stiffness / (POINT_LOAD_LIMIT * solid_material.youngs_modulus)
-        # With coupling.transfer blended the dimpled surface no longer feeds energy in (docs/coupling.md): the
+        # With the blended gap the dimpled surface no longer feeds energy in (docs/coupling.md): the
         # surface's indentation under the contact then limits the contact's accuracy, not the run's stability.
-        consequence = ("its force reaches the solid as a point load on one triangle's nodes, which a mesh this fine "
-                       "does not resolve; the coupled energy then grows with refinement (docs/coupling.md).  Set "
-                       "coupling.transfer: blended, or use" if scene.coupling.transfer == "nearest" else
-                       "the surface's indentation under it adds to the contact's compliance (docs/coupling.md).  Use")
+        if scene.coupling.transfer == "nearest":
+            consequence = ("its force reaches the solid as a point load on one triangle's nodes, which a mesh this "
+                           "fine does not resolve; the coupled energy then grows with refinement (docs/coupling.md). "
+                           " Set coupling.transfer: auto or blended, or use")
+        else:
+            chosen = " (coupling.transfer auto chose it)" if scene.coupling.transfer == "auto" else ""
+            consequence = (f"run uses the blended gap for this solid{chosen}, which keeps the energy bounded; the "
+                           f"surface's indentation under the contact adds to its compliance (docs/coupling.md).  "
+                           f"For accuracy use")
         warnings.append(
             f"solid {config.name}: a contact of group {name} is stiffer than the surface under it "
             f"(S_n/(E l) = {compliance:.3g} > {POINT_LOAD_LIMIT:g}): {consequence} surface elements of at least "
@@ -123,11 +138,13 @@ def _contact_figures(scene, config, solid, interval: float, warnings, limits=Non
 
 def coupling_assessment(scene, solids: dict, dt: float) -> tuple:
     """Collective, for already built solids (run): (the coupled-stability warnings of `pdemfem check`,
-    the longest interval fem_every x dt the held contact force allows over all solids [s])."""
+    the longest interval fem_every x dt the held contact force allows over all solids [s], the names of
+    the solids whose surface yields to a point load (coupling.transfer auto blends their gap))."""
     found = []
     limits = {}
+    point_loaded = set()
     interval = scene.coupling.fem_every * dt
     for config in scene.solids:
         if config.contact and scene.particles:
-            _contact_figures(scene, config, solids[config.name], interval, found, limits)
-    return found, min(limits.values(), default=math.inf)
+            _contact_figures(scene, config, solids[config.name], interval, found, limits, point_loaded)
+    return found, min(limits.values(), default=math.inf), point_loaded

@@ -284,11 +284,12 @@ class CouplingConfig(StrictModel):
                                 "contact law holds the solid's local Hertz deformation; right when the mesh is "
                                 "coarser than the contact radius), particle = the particle's only (the FE mesh "
                                 "supplies the solid's deformation; docs/coupling.md)")
-    transfer: Literal["nearest", "blended"] = Field(
-        "nearest", description="the particle-solid contact's gap: nearest = the distance to the nearest surface "
-                               "point, its force on that triangle's nodes; blended = a smooth blend of the facets "
-                               "under the particle, its elastic force spread over their nodes (stable where the "
-                               "surface dimples under the contact; docs/coupling.md)")
+    transfer: Literal["auto", "nearest", "blended"] = Field(
+        "auto", description="the particle-solid contact's gap: nearest = the distance to the nearest surface "
+                            "point, its force on that triangle's nodes; blended = a smooth blend of the facets "
+                            "under the particle, its elastic force spread over their nodes (stable where the "
+                            "surface dimples under the contact; docs/coupling.md); auto = blended for the solids "
+                            "whose surface yields to a point load (S_n/(E l) > 0.5, as check reports), else nearest")
 
 
 class Scene(StrictModel):
