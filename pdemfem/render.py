@@ -12,6 +12,7 @@ The run's files are read serially with h5py (rank 0); nothing is gathered from a
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import shutil
@@ -350,6 +351,7 @@ def _draw_matplotlib(picture: _Picture, target: Path, label: str) -> None:
 
 PARAVIEW_SCRIPT = Path(__file__).resolve().parent / "render_paraview.py"
 PARAVIEW_SECONDS = 300  # a generous bound: the largest example draws in about 10 s
+XVFB_SECONDS = 30  # Xvfb accepts clients well within a second
 # matplotlib's default 3-D view, so both renderers look at a scene from the same side.
 VIEW_ELEVATION, VIEW_AZIMUTH = 30.0, -60.0
 
@@ -373,23 +375,54 @@ def _write_polygons_vtk(path: Path, polygons: List[np.ndarray]) -> None:
 
 
 def _one_line(text: str) -> str:
-    """The last non-empty line of a program's error output (a traceback's last line names the error),
-    without the terminal colour codes ParaView's logger adds."""
+    """The line of a program's error output that names the error: ParaView's logged error ("ERR|")
+    if there is one (its crash then ends in a stack trace and "Aborted"), else the last non-empty
+    line (a Python traceback's names the exception); without the logger's terminal colour codes."""
     import re
 
     lines = [re.sub(r"\x1b\[[0-9;]*m", "", line).strip() for line in text.splitlines()]
+    logged = [line.split("ERR|", 1)[1].strip() for line in lines if "ERR|" in line]
+    if logged:
+        return logged[0]
     lines = [line for line in lines if line]
     return lines[-1] if lines else ""
 
 
-def _offscreen(pvpython: str) -> List[str]:
-    """The command that runs pvpython without a window.  `--force-offscreen-rendering` suffices for a
-    ParaView built with EGL or OSMesa; an X11 build (Debian's, for one) still needs an X server even
-    offscreen, so without $DISPLAY it runs inside xvfb-run's virtual one when xvfb-run is installed."""
-    command = [pvpython, "--force-offscreen-rendering"]
-    if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and shutil.which("xvfb-run"):
-        return ["xvfb-run", "--auto-servernum", "--server-args=-screen 0 1280x1024x24"] + command
-    return command
+@contextlib.contextmanager
+def _virtual_display():
+    """Extra environment for pvpython: {} normally; {"DISPLAY": ":N"} of a private Xvfb server when
+    this is Linux without $DISPLAY and Xvfb is installed.  pvpython's `--force-offscreen-rendering`
+    suffices for a ParaView built with EGL or OSMesa, but an X11 build (Debian's) still opens an X
+    connection offscreen.  Xvfb picks a free display itself (-displayfd) and writes its number only
+    once it accepts clients, so there is no race between servers started one after the other (as
+    xvfb-run's --auto-servernum has: pvpython then meets "bad X server connection")."""
+    import select
+    import subprocess
+
+    if not sys.platform.startswith("linux") or os.environ.get("DISPLAY") or not shutil.which("Xvfb"):
+        yield {}
+        return
+    read_end, write_end = os.pipe()
+    try:
+        server = subprocess.Popen(["Xvfb", "-displayfd", str(write_end), "-screen", "0", "1280x1024x24",
+                                   "-nolisten", "tcp"], pass_fds=(write_end,), stdin=subprocess.DEVNULL,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    finally:
+        os.close(write_end)
+    try:
+        with os.fdopen(read_end) as pipe:
+            ready, _, _ = select.select([pipe], [], [], XVFB_SECONDS)
+            number = pipe.readline().strip() if ready else ""
+        if not number.isdigit():
+            raise ParaViewFailed("the virtual X server (Xvfb) did not start")
+        yield {"DISPLAY": f":{number}"}
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout=XVFB_SECONDS)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
 
 
 def _draw_paraview(pvpython: str, picture: _Picture, target: Path, label: str) -> str:
@@ -402,7 +435,8 @@ def _draw_paraview(pvpython: str, picture: _Picture, target: Path, label: str) -
     with tempfile.TemporaryDirectory(prefix="pdemfem-render-") as scratch:
         scratch = Path(scratch)
         job = {"particles": None, "solids": [], "walls": None, "target": str(target.resolve()),
-               "size": list(PICTURE_SIZE), "title": label, "elevation": VIEW_ELEVATION, "azimuth": VIEW_AZIMUTH}
+               "size": list(PICTURE_SIZE), "title": label,
+               "box": [picture.low.tolist(), picture.high.tolist()], "elevation": VIEW_ELEVATION, "azimuth": VIEW_AZIMUTH}
         if len(picture.positions) and (picture.outdir / "particles.xdmf").is_file():
             job["particles"] = str((picture.outdir / "particles.xdmf").resolve())
         job["solids"] = [str((picture.outdir / f"{name}.xdmf").resolve()) for name in picture.solid_names
@@ -412,25 +446,31 @@ def _draw_paraview(pvpython: str, picture: _Picture, target: Path, label: str) -
             job["walls"] = str(scratch / "walls.vtk")
             _write_polygons_vtk(scratch / "walls.vtk", polygons)
         (scratch / "job.json").write_text(json.dumps(job))
-        # pvpython is its own Python: the venv's variables would make it import the wrong packages.
+        # pvpython is its own Python: the venv's variables would make it import the wrong packages.  It is
+        # also an MPI program (Debian's links Open MPI): what this process's MPI left in the environment
+        # (its PMIx server) would make pvpython's MPI start-up join it, which aborts it now and then.
+        from pdemfem.runtime import INHERITED_MPI_PREFIXES
+
         environment = {key: value for key, value in os.environ.items()
-                       if key not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+                       if key not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")
+                       and not key.startswith(INHERITED_MPI_PREFIXES)}
         environment.setdefault("QT_QPA_PLATFORM", "offscreen")
         if target.exists():
             target.unlink()  # a stale picture must not pass for a new one
-        command = _offscreen(pvpython) + [str(PARAVIEW_SCRIPT), str(scratch / "job.json")]
-        try:
-            completed = subprocess.run(command, capture_output=True, text=True, timeout=PARAVIEW_SECONDS,
-                                       env=environment, cwd=scratch)
-        except subprocess.TimeoutExpired:
-            raise ParaViewFailed(f"pvpython did not finish within {PARAVIEW_SECONDS} s") from None
-        except OSError as error:
-            raise ParaViewFailed(f"cannot run {pvpython}: {error.strerror}") from None
+        command = [pvpython, "--force-offscreen-rendering", str(PARAVIEW_SCRIPT), str(scratch / "job.json")]
+        with _virtual_display() as display:
+            try:
+                completed = subprocess.run(command, capture_output=True, text=True, timeout=PARAVIEW_SECONDS,
+                                           env={**environment, **display}, cwd=scratch)
+            except subprocess.TimeoutExpired:
+                raise ParaViewFailed(f"pvpython did not finish within {PARAVIEW_SECONDS} s") from None
+            except OSError as error:
+                raise ParaViewFailed(f"cannot run {pvpython}: {error.strerror}") from None
         if completed.returncode != 0:
             reason = _one_line(completed.stderr) or _one_line(completed.stdout)
-            if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and command[0] == pvpython:
-                reason += ("; " if reason else "") + ("no X display and no xvfb-run: install xvfb, or use a ParaView "
-                                                      "built for offscreen rendering (EGL or OSMesa)")
+            if "DISPLAY" not in display and "X server" in completed.stderr:
+                reason = ("no X display for this X11 build of ParaView: install Xvfb (apt-get install xvfb) or "
+                          "use a ParaView built for offscreen rendering (EGL or OSMesa)")
             raise ParaViewFailed(f"pvpython exited with status {completed.returncode}" + (f": {reason}" if reason else ""))
         reports = [line for line in completed.stdout.splitlines() if line.startswith("{")]
         if not reports or not target.is_file():

@@ -40,6 +40,15 @@ def point_array_names(source):
     return [source.PointData.GetArray(index).Name for index in range(source.PointData.GetNumberOfArrays())]
 
 
+def fit_range(lookup, reader, name):
+    """Colour the magnitudes of `name` from 0 to their largest value at the step the reader last
+    updated (the last one; rescaling by the display would use the view's time, set only at the end).
+    From 0, so that one rolling sphere or a uniform speed still gets a meaningful colour."""
+    high = reader.PointData[name].GetRange(-1)[1]
+    lookup.RescaleTransferFunction(0.0, high if high > 0 else 1.0)
+    lookup.AutomaticRescaleRangeMode = "Never"
+
+
 def main(job_file):
     with open(job_file) as handle:
         job = json.load(handle)
@@ -78,9 +87,8 @@ def main(job_file):
             ColorBy(display, ("POINTS", "displacements", "Magnitude"))
             lookup = GetColorTransferFunction("displacements")
             lookup.ApplyPreset("Plasma (matplotlib)", True)
-            display.RescaleTransferFunctionToDataRange(False, True)
-            lookup.ScalarRangeInitialized = 1
-            lookup_bar(view, lookup, "|u| [m]", bars)
+            fit_range(lookup, reader, "displacements")
+            lookup_bar(view, lookup, "displacement [m]", bars)
             bars += 1
         display.EdgeColor = [0.2, 0.2, 0.2]
         time = solid_time if time is None else max(time, solid_time)
@@ -93,8 +101,10 @@ def main(job_file):
         names = point_array_names(reader)
         # The sphere source has radius 0.5: scaling by the radius times 2 draws the true size.
         glyphs = Glyph(Input=reader, GlyphType="Sphere")
-        glyphs.GlyphType.ThetaResolution = 12
-        glyphs.GlyphType.PhiResolution = 8
+        # Few particles are drawn large: smoother spheres cost nothing there.
+        few = reader.GetDataInformation().GetNumberOfPoints() <= 100
+        glyphs.GlyphType.ThetaResolution = 32 if few else 12
+        glyphs.GlyphType.PhiResolution = 16 if few else 8
         glyphs.OrientationArray = ["POINTS", "No orientation array"]
         glyphs.GlyphMode = "All Points"
         if "radii" in names:
@@ -106,7 +116,7 @@ def main(job_file):
             ColorBy(display, ("POINTS", "velocities", "Magnitude"))
             lookup = GetColorTransferFunction("velocities")
             lookup.ApplyPreset("Viridis (matplotlib)", True)
-            display.RescaleTransferFunctionToDataRange(False, True)
+            fit_range(lookup, reader, "velocities")
             lookup_bar(view, lookup, "speed [m/s]", bars)
             bars += 1
         else:
@@ -126,6 +136,8 @@ def main(job_file):
 
     # The viewing direction of the matplotlib picture (elevation 30 deg, azimuth -60 deg, z up),
     # then ParaView fits the distance to everything shown.
+    # paraview.simple resets the camera at a view's first render: render once before placing it.
+    Render(view)
     elevation, azimuth = math.radians(job["elevation"]), math.radians(job["azimuth"])
     direction = [math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
                  math.sin(elevation)]
@@ -133,7 +145,18 @@ def main(job_file):
     view.CameraPosition = direction
     view.CameraViewUp = [0.0, 0.0, 1.0]
     view.CameraParallelProjection = 0
-    ResetCamera(view)
+    if job.get("box"):
+        # The box pdemfem fitted (with room around a few spheres, as in the matplotlib picture).
+        (x0, y0, z0), (x1, y1, z1) = job["box"]
+        view.ResetCamera(x0, x1, y0, y1, z0, z1)
+    else:
+        ResetCamera(view)
+    if bars:
+        # Keep the scene left of the colour legends (they take the right fifth of the picture): shift
+        # the image left by a tenth of its width and step back to make room.
+        camera = view.GetActiveCamera()
+        camera.SetWindowCenter(0.2, 0.0)
+        camera.Dolly(0.88)
     Render(view)
     SaveScreenshot(job["target"], view, ImageResolution=[width, height], TransparentBackground=0)
     print(json.dumps(report))
@@ -144,12 +167,15 @@ def lookup_bar(view, lookup, title, index):
     bar = GetScalarBar(lookup, view)
     bar.Title = title
     bar.ComponentTitle = ""
+    bar.HorizontalTitle = 1
+    bar.RangeLabelFormat = "%-#.2g"
+    bar.LabelFormat = "%-#.2g"
     bar.TitleColor = bar.LabelColor = INK
     bar.TitleFontSize = bar.LabelFontSize = 10
     bar.WindowLocation = "Any Location"
     bar.Orientation = "Vertical"
-    bar.ScalarBarLength = 0.33
-    bar.Position = [0.86, 0.52 - 0.42 * index]
+    bar.ScalarBarLength = 0.3
+    bar.Position = [0.8, 0.55 - 0.47 * index]
     bar.Visibility = 1
     return bar
 
