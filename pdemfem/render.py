@@ -193,8 +193,8 @@ def draw_output(outdir, scene=None, target=None, title: Optional[str] = None, re
         except ParaViewFailed as failure:
             if renderer == "paraview":
                 raise PdemfemError(f"pdemfem render --renderer paraview ({executable})", str(failure),
-                                   "check that this pvpython runs offscreen (pvpython --force-offscreen-rendering "
-                                   "--version), or use --renderer matplotlib") from None
+                                   "see docs/output.md, 'A picture of a run' (an X11 build of ParaView needs Xvfb "
+                                   "when there is no display), or use --renderer matplotlib") from None
             (warn or _to_stderr)(f"ParaView could not draw {target.name} ({failure}); drawing it with matplotlib")
     _draw_matplotlib(picture, target, label)
     import matplotlib
@@ -375,15 +375,16 @@ def _write_polygons_vtk(path: Path, polygons: List[np.ndarray]) -> None:
 
 
 def _one_line(text: str) -> str:
-    """The line of a program's error output that names the error: ParaView's logged error ("ERR|")
-    if there is one (its crash then ends in a stack trace and "Aborted"), else the last non-empty
+    """The line of a program's error output that names the error: ParaView's first logged error
+    ("ERR|", else "FATL|": a crash then ends in a stack trace and "Aborted"), else the last non-empty
     line (a Python traceback's names the exception); without the logger's terminal colour codes."""
     import re
 
     lines = [re.sub(r"\x1b\[[0-9;]*m", "", line).strip() for line in text.splitlines()]
-    logged = [line.split("ERR|", 1)[1].strip() for line in lines if "ERR|" in line]
-    if logged:
-        return logged[0]
+    for level in ("ERR|", "FATL|"):
+        logged = [line.split(level, 1)[1].strip() for line in lines if level in line]
+        if logged:
+            return logged[0]
     lines = [line for line in lines if line]
     return lines[-1] if lines else ""
 
@@ -395,7 +396,7 @@ def _virtual_display():
     suffices for a ParaView built with EGL or OSMesa, but an X11 build (Debian's) still opens an X
     connection offscreen.  Xvfb picks a free display itself (-displayfd) and writes its number only
     once it accepts clients, so there is no race between servers started one after the other (as
-    xvfb-run's --auto-servernum has: pvpython then meets "bad X server connection")."""
+    xvfb-run's --auto-servernum has).  A failed connection shows as "bad X server connection"."""
     import select
     import subprocess
 
@@ -404,8 +405,10 @@ def _virtual_display():
         return
     read_end, write_end = os.pipe()
     try:
+        # -noreset: by default an X server resets when its last client disconnects, and pvpython
+        # connects more than once (an OpenGL probe, then its window): one lands in the reset.
         server = subprocess.Popen(["Xvfb", "-displayfd", str(write_end), "-screen", "0", "1280x1024x24",
-                                   "-nolisten", "tcp"], pass_fds=(write_end,), stdin=subprocess.DEVNULL,
+                                   "-nolisten", "tcp", "-noreset"], pass_fds=(write_end,), stdin=subprocess.DEVNULL,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     finally:
         os.close(write_end)
@@ -468,9 +471,9 @@ def _draw_paraview(pvpython: str, picture: _Picture, target: Path, label: str) -
                 raise ParaViewFailed(f"cannot run {pvpython}: {error.strerror}") from None
         if completed.returncode != 0:
             reason = _one_line(completed.stderr) or _one_line(completed.stdout)
-            if "DISPLAY" not in display and "X server" in completed.stderr:
-                reason = ("no X display for this X11 build of ParaView: install Xvfb (apt-get install xvfb) or "
-                          "use a ParaView built for offscreen rendering (EGL or OSMesa)")
+            if sys.platform.startswith("linux") and "DISPLAY" not in display and not os.environ.get("DISPLAY"):
+                reason += ("; " if reason else "") + ("there is no X display, which an X11 build of ParaView needs "
+                                                      "even offscreen: install Xvfb (apt-get install xvfb)")
             raise ParaViewFailed(f"pvpython exited with status {completed.returncode}" + (f": {reason}" if reason else ""))
         reports = [line for line in completed.stdout.splitlines() if line.startswith("{")]
         if not reports or not target.is_file():
@@ -558,8 +561,8 @@ def _gallery_page(paths, drawn_by) -> str:
              "<!-- Written by `pdemfem render --gallery`, which runs every examples/*.yaml and draws its last "
              "output step. -->", "",
              "The last output step of every example in `examples/`, as `pdemfem render --gallery` draws it",
-             "(particles coloured by speed, solids by the magnitude of their displacement, walls translucent)"
-             + (f"; these pictures were drawn by {drawn_by[0]}." if same else "."),
+             "(particles coloured by speed, solids by the magnitude of their displacement, walls translucent).",
+             *([f"These pictures were drawn by {drawn_by[0]}."] if same else []),
              "Run one yourself: `pdemfem run examples/<name>.yaml -o out/<name>`, then",
              "`pdemfem render out/<name> --scene examples/<name>.yaml`, or open the XDMF files in ParaView.",
              "`pdemfem render` draws with ParaView (pvpython) when it is installed and with matplotlib",

@@ -149,3 +149,9 @@ def test_gallery_shows_every_example(example):
     assert picture.read_bytes()[:8] == PNG and picture.stat().st_size < LARGEST_PICTURE
     assert f"(img/gallery/{example.stem}.png)" in GALLERY_PAGE.read_text()
     assert f"docs/img/gallery/{example.stem}.png" in (ROOT / "README.md").read_text()
+
+
+def test_gallery_page_names_the_renderer():
+    """The committed pictures may come from either renderer: the page says which drew them."""
+    page = GALLERY_PAGE.read_text()
+    assert "These pictures were drawn by ParaView " in page or "These pictures were drawn by matplotlib " in page
