@@ -1,14 +1,18 @@
-"""A picture of a run's last output step (matplotlib, Agg backend: no display needed), and the gallery.
+"""A picture of a run's last output step, headless, and the gallery.
 
     render_output("out/drum", scene="examples/drum.yaml")    -> out/drum/render.png
     build_gallery()                                           -> docs/img/gallery/<example>.png, docs/gallery.md
 
 The picture is drawn from what the run wrote: the particles of the last step of ``particles.h5``
-(spheres drawn as markers sized by ``radii``, coloured by speed when ``velocities`` was written), each
-solid's boundary from ``<solid>.h5`` displaced by its last ``displacements`` (coloured by the
+(spheres sized by ``radii``, coloured by speed when ``velocities`` was written), each solid's
+boundary from ``<solid>.h5`` displaced by its last ``displacements`` (coloured by the
 displacement's magnitude), and, when the scene is given, its walls: mesh walls as their triangles,
 cylinders as their mantle, planes as translucent rectangles clipped to the picture's bounding box.
-The run's files are read serially with h5py (rank 0); nothing is gathered from a running job.
+Two renderers: ParaView, by render_paraview.py run in ParaView's own ``pvpython`` (a subprocess,
+offscreen; sphere glyphs, the XDMF files read by ParaView's Xdmf3 reader), used when pvpython is
+found; and matplotlib (Agg backend, mplot3d: spheres as sized markers) otherwise, or when
+pvpython fails ("auto" says why in one line).  The run's files are read serially with h5py
+(rank 0); nothing is gathered from a running job.
 """
 from __future__ import annotations
 

@@ -31,8 +31,11 @@ INK = [0.1, 0.1, 0.1]
 
 
 def last_time(reader):
-    """The reader's last time step (0 for a series of one step)."""
-    times = list(reader.TimestepValues) if reader.TimestepValues else []
+    """The reader's last time step (a series of one step gives a plain number, none gives 0)."""
+    times = reader.TimestepValues
+    if isinstance(times, (int, float)):
+        return float(times)
+    times = list(times) if times else []
     return times[-1] if times else 0.0
 
 
