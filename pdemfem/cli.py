@@ -5,8 +5,10 @@
     pdemfem check scene.yaml [--strict]     (reads and checks everything `run` reads before its first step)
     pdemfem info
     pdemfem plot OUTDIR [--quiet]
-    pdemfem render OUTDIR [--scene scene.yaml] [-o picture.png] [--quiet]   (the run's last output step)
-    pdemfem render --gallery [--runs DIR] [--quiet]     (runs every examples/*.yaml; docs/img/gallery, docs/gallery.md)
+    pdemfem render OUTDIR [--scene scene.yaml] [-o picture.png] [--renderer auto|paraview|matplotlib]
+                   [--pvpython PATH] [--quiet]          (the run's last output step)
+    pdemfem render --gallery [--runs DIR] [--renderer ...] [--quiet]   (runs every examples/*.yaml;
+                                                         docs/img/gallery, docs/gallery.md)
 
 Under MPI (``python -m pdemfem.launch -n 2 -- pdemfem run scene.yaml``) every rank
 runs the same command.  Errors:
@@ -107,6 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "docs/img/gallery/<example>.png and docs/gallery.md")
     render.add_argument("--runs", metavar="DIR", default="out/gallery",
                         help="with --gallery: where the example runs write (default: out/gallery)")
+    render.add_argument("--renderer", default="auto", help="auto (default: ParaView's pvpython when found, "
+                        "else matplotlib), paraview or matplotlib")
+    render.add_argument("--pvpython", metavar="PATH", help="ParaView's pvpython (default: $PDEMFEM_PVPYTHON, "
+                        "then pvpython on PATH)")
     render.add_argument("--quiet", action="store_true", help="do not list the files written")
     render.set_defaults(handler=_command_render)
     return parser
@@ -556,13 +562,15 @@ def _command_render(arguments, comm) -> int:
         if arguments.outdir is not None:
             raise PdemfemError("pdemfem render", "--gallery runs the examples itself; it takes no OUTDIR",
                                "pdemfem render --gallery, or pdemfem render OUTDIR")
-        render.build_gallery(comm, arguments.runs, say=lambda text: _say(comm, text, arguments.quiet))
+        render.build_gallery(comm, arguments.runs, say=lambda text: _say(comm, text, arguments.quiet),
+                             renderer=arguments.renderer, pvpython=arguments.pvpython)
         return 0
     if arguments.outdir is None:
         raise PdemfemError("pdemfem render", "no output directory given",
                            "pdemfem render OUTDIR [--scene scene.yaml], or pdemfem render --gallery")
     written = _on_root(comm, lambda: str(render.render_output(arguments.outdir, scene=arguments.scene,
-                                                               target=arguments.output)))
+                                                               target=arguments.output, renderer=arguments.renderer,
+                                                               pvpython=arguments.pvpython)))
     _say(comm, f"wrote {written}", arguments.quiet)
     return 0
 

@@ -1,27 +1,35 @@
-"""A picture of a run's last output step (matplotlib, Agg backend: no display needed), and the gallery.
+"""A picture of a run's last output step, headless, and the gallery.
 
     render_output("out/drum", scene="examples/drum.yaml")    -> out/drum/render.png
     build_gallery()                                           -> docs/img/gallery/<example>.png, docs/gallery.md
 
 The picture is drawn from what the run wrote: the particles of the last step of ``particles.h5``
-(spheres drawn as markers sized by ``radii``, coloured by speed when ``velocities`` was written), each
-solid's boundary from ``<solid>.h5`` displaced by its last ``displacements`` (coloured by the
+(spheres sized by ``radii``, coloured by speed when ``velocities`` was written), each solid's
+boundary from ``<solid>.h5`` displaced by its last ``displacements`` (coloured by the
 displacement's magnitude), and, when the scene is given, its walls: mesh walls as their triangles,
 cylinders as their mantle, planes as translucent rectangles clipped to the picture's bounding box.
-The run's files are read serially with h5py (rank 0); nothing is gathered from a running job.
+Two renderers: ParaView, by render_paraview.py run in ParaView's own ``pvpython`` (a subprocess,
+offscreen; sphere glyphs, the XDMF files read by ParaView's Xdmf3 reader), used when pvpython is
+found; and matplotlib (Agg backend, mplot3d: spheres as sized markers) otherwise, or when
+pvpython fails ("auto" says why in one line).  The run's files are read serially with h5py
+(rank 0); nothing is gathered from a running job.
 """
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import shutil
+import sys
 import warnings
 from pathlib import Path
-from typing import List, Optional
+from typing import Callable, List, Optional
 
 import numpy as np
 
 from pdemfem.errors import PdemfemError
 
-__all__ = ["render_output", "build_gallery", "GALLERY_DIR", "GALLERY_PAGE"]
+__all__ = ["render_output", "draw_output", "choose_renderer", "build_gallery", "GALLERY_DIR", "GALLERY_PAGE"]
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES_DIR = ROOT / "examples"
@@ -30,6 +38,8 @@ GALLERY_PAGE = ROOT / "docs" / "gallery.md"
 # Pictures for the repository stay small (a gallery of a few examples must not bloat the history).
 PICTURE_INCHES = (5.0, 4.0)
 PICTURE_DPI = 90
+PICTURE_SIZE = (round(PICTURE_INCHES[0] * PICTURE_DPI), round(PICTURE_INCHES[1] * PICTURE_DPI))  # pixels
+PVPYTHON_VARIABLE = "PDEMFEM_PVPYTHON"
 
 
 # --------------------------------------------------------------------------- reading a run
@@ -160,72 +170,157 @@ def _pyplot():
     return pyplot, Poly3DCollection
 
 
-def render_output(outdir, scene=None, target=None, title: Optional[str] = None) -> Path:
+def render_output(outdir, scene=None, target=None, title: Optional[str] = None, renderer: str = "auto",
+                  pvpython: Optional[str] = None, warn: Optional[Callable[[str], None]] = None) -> Path:
     """Draw the last output step of the run in `outdir` into `target` (default OUTDIR/render.png).
 
     `scene`: the scene file the run used (its walls are drawn, its solids' names found); without it
-    the particles and every ``<solid>.h5`` beside them are drawn."""
-    outdir = Path(outdir)
-    if not outdir.is_dir():
-        raise PdemfemError(str(outdir), "no such output directory", "run a scene first: pdemfem run scene.yaml -o DIR")
-    loaded = None
-    if scene is not None:
-        from pdemfem.scene.loader import load_scene
+    the particles and every ``<solid>.h5`` beside them are drawn.  `renderer`: "auto" (ParaView's
+    pvpython when found, else matplotlib), "paraview" or "matplotlib"; `pvpython`: its path (default
+    ``$PDEMFEM_PVPYTHON``, then ``pvpython`` on PATH).  `warn` receives the one-line reason when
+    "auto" falls back from ParaView to matplotlib (default: printed to stderr)."""
+    return draw_output(outdir, scene, target, title, renderer, pvpython, warn)[0]
 
-        loaded = load_scene(scene)
-    particles_file = outdir / "particles.h5"
-    time = None
-    positions = np.zeros((0, 3))
-    radii = np.zeros(0)
-    speeds = None
-    if particles_file.is_file():
-        time, fields = _last_step(particles_file, ["positions", "radii", "velocities"])
-        if "positions" not in fields:
-            raise PdemfemError(str(particles_file), "the run wrote no particle positions",
-                               "add positions to output.particles and re-run")
-        positions = fields["positions"]
-        radii = fields.get("radii", np.full(len(positions), 0.0))
-        if "velocities" in fields:
-            speeds = np.linalg.norm(fields["velocities"], axis=1)
-    if loaded is not None:
-        solid_names = [solid.name for solid in loaded[0].solids]
-    else:
-        solid_names = [path.stem for path in sorted(outdir.glob("*.h5"))
-                       if path.stem != "particles" and (outdir / f"{path.stem}.xdmf").is_file()]
-    surfaces = [_solid_surface(outdir / f"{name}.h5") for name in solid_names if (outdir / f"{name}.h5").is_file()]
-    if not len(positions) and not surfaces:
-        raise PdemfemError(str(outdir), "no particles.h5 or solid series to draw",
-                           "run with output.particles (positions, radii) or solids in the scene")
 
-    # The picture's box: the particles (with their radii), the solids, mesh walls and cylinder
-    # cross-sections; planes (infinite) are clipped to it.
-    extents = [positions - radii[:, None], positions + radii[:, None]] if len(positions) else []
-    extents += [triangles.reshape(-1, 3) for triangles, _ in surfaces]
-    if loaded is not None:
-        extents += _finite_wall_points(loaded[0], loaded[1], extents)
-    everything = np.vstack(extents)
-    low, high = everything.min(axis=0), everything.max(axis=0)
-    margin = 0.05 * float((high - low).max())
-    low, high = low - margin, high + margin
-    if len(radii):
-        # A scene of a few spheres (a collision, a rolling ball) is shown with room around them.
-        least = 6.0 * 2.0 * float(radii.max())
-        centre = 0.5 * (low + high)
-        low, high = np.minimum(low, centre - 0.5 * least), np.maximum(high, centre + 0.5 * least)
+def draw_output(outdir, scene=None, target=None, title: Optional[str] = None, renderer: str = "auto",
+                pvpython: Optional[str] = None, warn: Optional[Callable[[str], None]] = None):
+    """render_output, returning (picture, the renderer that drew it, e.g. "ParaView 5.11.0")."""
+    executable = choose_renderer(renderer, pvpython)
+    picture = _Picture.gather(Path(outdir), scene)
+    target = Path(target) if target is not None else picture.outdir / "render.png"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    label = title or picture.outdir.name
+    if executable is not None:
+        try:
+            version = _draw_paraview(executable, picture, target, label)
+            return target, f"ParaView {version}"
+        except ParaViewFailed as failure:
+            if renderer == "paraview":
+                raise PdemfemError(f"pdemfem render --renderer paraview ({executable})", str(failure),
+                                   "see docs/output.md, 'A picture of a run' (an X11 build of ParaView needs Xvfb "
+                                   "when there is no display), or use --renderer matplotlib") from None
+            (warn or _to_stderr)(f"ParaView could not draw {target.name} ({failure}); drawing it with matplotlib")
+    _draw_matplotlib(picture, target, label)
+    import matplotlib
 
+    return target, f"matplotlib {matplotlib.__version__}"
+
+
+def _to_stderr(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+RENDERERS = ("auto", "paraview", "matplotlib")
+
+
+def find_pvpython(pvpython: Optional[str] = None) -> Optional[str]:
+    """The pvpython to use: `pvpython` if given, else $PDEMFEM_PVPYTHON, else pvpython on PATH (or None).
+    A path that is given but not an executable is an error (a typo must not silently mean matplotlib)."""
+    given, key = (pvpython, "--pvpython") if pvpython else (os.environ.get(PVPYTHON_VARIABLE), PVPYTHON_VARIABLE)
+    if not given:
+        return shutil.which("pvpython")
+    found = shutil.which(given)
+    if found is None:
+        raise PdemfemError(f"{key} {given}", "no such executable",
+                           f"give the path of ParaView's pvpython, or unset {key} to use pvpython on PATH")
+    return found
+
+
+def choose_renderer(renderer: str, pvpython: Optional[str] = None) -> Optional[str]:
+    """The pvpython to draw with, or None for matplotlib (checked before anything is read or run)."""
+    if renderer not in RENDERERS:
+        raise PdemfemError("--renderer", f"unknown renderer {renderer!r}", "use auto, paraview or matplotlib")
+    if renderer == "matplotlib":
+        return None
+    executable = find_pvpython(pvpython)
+    if executable is None and renderer == "paraview":
+        raise PdemfemError("--renderer paraview", "pvpython (ParaView's Python) is not on PATH",
+                           "install ParaView (Debian/Ubuntu: apt-get install paraview), or give its pvpython with "
+                           f"--pvpython PATH or {PVPYTHON_VARIABLE}=PATH, or use --renderer matplotlib")
+    return executable
+
+
+class _Picture:
+    """What a picture shows, read from a run's files: the last step's particles and solid surfaces,
+    the scene's walls, and the box [low, high] that holds them."""
+
+    def __init__(self, outdir, loaded, time, positions, radii, speeds, solid_names, surfaces, low, high):
+        self.outdir, self.loaded, self.time = outdir, loaded, time
+        self.positions, self.radii, self.speeds = positions, radii, speeds
+        self.solid_names, self.surfaces, self.low, self.high = solid_names, surfaces, low, high
+
+    @classmethod
+    def gather(cls, outdir: Path, scene) -> "_Picture":
+        if not outdir.is_dir():
+            raise PdemfemError(str(outdir), "no such output directory", "run a scene first: pdemfem run scene.yaml -o DIR")
+        loaded = None
+        if scene is not None:
+            from pdemfem.scene.loader import load_scene
+
+            loaded = load_scene(scene)
+        particles_file = outdir / "particles.h5"
+        time = None
+        positions = np.zeros((0, 3))
+        radii = np.zeros(0)
+        speeds = None
+        if particles_file.is_file():
+            time, fields = _last_step(particles_file, ["positions", "radii", "velocities"])
+            if "positions" not in fields:
+                raise PdemfemError(str(particles_file), "the run wrote no particle positions",
+                                   "add positions to output.particles and re-run")
+            positions = fields["positions"]
+            radii = fields.get("radii", np.full(len(positions), 0.0))
+            if "velocities" in fields:
+                speeds = np.linalg.norm(fields["velocities"], axis=1)
+        if loaded is not None:
+            solid_names = [solid.name for solid in loaded[0].solids]
+        else:
+            solid_names = [path.stem for path in sorted(outdir.glob("*.h5"))
+                           if path.stem != "particles" and (outdir / f"{path.stem}.xdmf").is_file()]
+        solid_names = [name for name in solid_names if (outdir / f"{name}.h5").is_file()]
+        surfaces = [_solid_surface(outdir / f"{name}.h5") for name in solid_names]
+        if not len(positions) and not surfaces:
+            raise PdemfemError(str(outdir), "no particles.h5 or solid series to draw",
+                               "run with output.particles (positions, radii) or solids in the scene")
+
+        # The picture's box: the particles (with their radii), the solids, mesh walls and cylinder
+        # cross-sections; planes (infinite) are clipped to it.
+        extents = [positions - radii[:, None], positions + radii[:, None]] if len(positions) else []
+        extents += [triangles.reshape(-1, 3) for triangles, _ in surfaces]
+        if loaded is not None:
+            extents += _finite_wall_points(loaded[0], loaded[1], extents)
+        everything = np.vstack(extents)
+        low, high = everything.min(axis=0), everything.max(axis=0)
+        margin = 0.05 * float((high - low).max())
+        low, high = low - margin, high + margin
+        if len(radii):
+            # A scene of a few spheres (a collision, a rolling ball) is shown with room around them.
+            least = 6.0 * 2.0 * float(radii.max())
+            centre = 0.5 * (low + high)
+            low, high = np.minimum(low, centre - 0.5 * least), np.maximum(high, centre + 0.5 * least)
+        return cls(outdir, loaded, time, positions, radii, speeds, solid_names, surfaces, low, high)
+
+    def wall_polygons(self) -> List[np.ndarray]:
+        """The scene's walls inside the picture's box (none without the scene)."""
+        if self.loaded is None or not self.loaded[0].walls:
+            return []
+        return _wall_polygons(self.loaded[0], self.loaded[1], self.low, self.high)
+
+
+def _draw_matplotlib(picture: _Picture, target: Path, label: str) -> None:
+    positions, radii, speeds, low, high = picture.positions, picture.radii, picture.speeds, picture.low, picture.high
     pyplot, Poly3DCollection = _pyplot()
     figure = pyplot.figure(figsize=PICTURE_INCHES)
     axes = figure.add_subplot(projection="3d")
     # Draw walls, then solids, then particles: mplot3d sorts whole collections by depth, which hides
     # grains resting on a solid's top behind the solid.
     axes.computed_zorder = False
-    if loaded is not None and loaded[0].walls:
-        polygons = _wall_polygons(loaded[0], loaded[1], low, high)
-        if polygons:
-            axes.add_collection3d(Poly3DCollection(polygons, facecolor=(0.6, 0.6, 0.65, 0.12),
-                                                   edgecolor=(0.3, 0.3, 0.35, 0.15), linewidths=0.3,
-                                                   zorder=0))
-    for triangles, magnitude in surfaces:
+    polygons = picture.wall_polygons()
+    if polygons:
+        axes.add_collection3d(Poly3DCollection(polygons, facecolor=(0.6, 0.6, 0.65, 0.12),
+                                               edgecolor=(0.3, 0.3, 0.35, 0.15), linewidths=0.3,
+                                               zorder=0))
+    for triangles, magnitude in picture.surfaces:
         colours = pyplot.get_cmap("plasma")(magnitude / magnitude.max() if magnitude.max() > 0 else magnitude)
         axes.add_collection3d(Poly3DCollection(triangles, facecolor=colours, edgecolor=(0, 0, 0, 0.15),
                                                linewidths=0.2, alpha=0.9, zorder=1))
@@ -249,13 +344,157 @@ def render_output(outdir, scene=None, target=None, title: Optional[str] = None) 
     axes.set_ylabel("y [m]", fontsize="small")
     axes.set_zlabel("z [m]", fontsize="small")
     axes.tick_params(labelsize="x-small")
-    label = title or outdir.name
+    time = picture.time
     axes.set_title(f"{label}" + (f", t = {time:.3g} s" if time is not None else ""), fontsize="medium")
-    target = Path(target) if target is not None else outdir / "render.png"
-    target.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(target, dpi=PICTURE_DPI)
     pyplot.close(figure)
-    return target
+
+
+# --------------------------------------------------------------------------- ParaView (pvpython)
+
+
+PARAVIEW_SCRIPT = Path(__file__).resolve().parent / "render_paraview.py"
+PARAVIEW_SECONDS = 300  # a generous bound: the largest example draws in about 10 s
+XVFB_SECONDS = 30  # Xvfb accepts clients well within a second
+# matplotlib's default 3-D view, so both renderers look at a scene from the same side.
+VIEW_ELEVATION, VIEW_AZIMUTH = 30.0, -60.0
+
+
+class ParaViewFailed(Exception):
+    """pvpython did not produce the picture; the message is the reason in one line."""
+
+
+def _write_polygons_vtk(path: Path, polygons: List[np.ndarray]) -> None:
+    """Polygons as a legacy-VTK POLYDATA file (ASCII), the simplest format every ParaView reads."""
+    points = np.vstack(polygons)
+    lines = ["# vtk DataFile Version 3.0", "pdemfem walls", "ASCII", "DATASET POLYDATA",
+             f"POINTS {len(points)} double"]
+    lines += [f"{x!r} {y!r} {z!r}" for x, y, z in points.tolist()]
+    lines.append(f"POLYGONS {len(polygons)} {sum(len(polygon) + 1 for polygon in polygons)}")
+    start = 0
+    for polygon in polygons:
+        lines.append(" ".join(str(index) for index in [len(polygon), *range(start, start + len(polygon))]))
+        start += len(polygon)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _one_line(text: str) -> str:
+    """The line of a program's error output that names the error: ParaView's first logged error
+    ("ERR|", else "FATL|": a crash then ends in a stack trace and "Aborted"), else the last non-empty
+    line (a Python traceback's names the exception); without the logger's terminal colour codes."""
+    import re
+
+    lines = [re.sub(r"\x1b\[[0-9;]*m", "", line).strip() for line in text.splitlines()]
+    for level in ("ERR|", "FATL|"):
+        logged = [line.split(level, 1)[1].strip() for line in lines if level in line]
+        if logged:
+            return logged[0]
+    lines = [line for line in lines if line]
+    return lines[-1] if lines else ""
+
+
+@contextlib.contextmanager
+def _virtual_display():
+    """Extra environment for pvpython: {} normally; {"DISPLAY": ":N"} of a private Xvfb server when
+    this is Linux without $DISPLAY and Xvfb is installed.  pvpython's `--force-offscreen-rendering`
+    suffices for a ParaView built with EGL or OSMesa, but an X11 build (Debian's) still opens an X
+    connection offscreen.  Xvfb picks a free display itself (-displayfd) and writes its number only
+    once it accepts clients, so there is no race between servers started one after the other (as
+    xvfb-run's --auto-servernum has).  A failed connection shows as "bad X server connection"."""
+    import select
+    import subprocess
+
+    if not sys.platform.startswith("linux") or os.environ.get("DISPLAY") or not shutil.which("Xvfb"):
+        yield {}
+        return
+    read_end, write_end = os.pipe()
+    try:
+        # -noreset: by default an X server resets when its last client disconnects, and pvpython
+        # connects more than once (an OpenGL probe, then its window): one lands in the reset.
+        server = subprocess.Popen(["Xvfb", "-displayfd", str(write_end), "-screen", "0", "1280x1024x24",
+                                   "-nolisten", "tcp", "-noreset"], pass_fds=(write_end,), stdin=subprocess.DEVNULL,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    finally:
+        os.close(write_end)
+    try:
+        with os.fdopen(read_end) as pipe:
+            ready, _, _ = select.select([pipe], [], [], XVFB_SECONDS)
+            number = pipe.readline().strip() if ready else ""
+        if not number.isdigit():
+            raise ParaViewFailed("the virtual X server (Xvfb) did not start")
+        yield {"DISPLAY": f":{number}"}
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout=XVFB_SECONDS)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
+
+
+def _draw_paraview(pvpython: str, picture: _Picture, target: Path, label: str) -> str:
+    """Draw `picture` with render_paraview.py run by `pvpython`, offscreen; returns ParaView's version.
+    Raises ParaViewFailed (with the reason) when pvpython fails or writes no picture of the right size."""
+    import json
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="pdemfem-render-") as scratch:
+        scratch = Path(scratch)
+        job = {"particles": None, "solids": [], "walls": None, "target": str(target.resolve()),
+               "size": list(PICTURE_SIZE), "title": label,
+               "box": [picture.low.tolist(), picture.high.tolist()], "elevation": VIEW_ELEVATION, "azimuth": VIEW_AZIMUTH}
+        if len(picture.positions) and (picture.outdir / "particles.xdmf").is_file():
+            job["particles"] = str((picture.outdir / "particles.xdmf").resolve())
+        job["solids"] = [str((picture.outdir / f"{name}.xdmf").resolve()) for name in picture.solid_names
+                         if (picture.outdir / f"{name}.xdmf").is_file()]
+        polygons = picture.wall_polygons()
+        if polygons:
+            job["walls"] = str(scratch / "walls.vtk")
+            _write_polygons_vtk(scratch / "walls.vtk", polygons)
+        (scratch / "job.json").write_text(json.dumps(job))
+        # pvpython is its own Python: the venv's variables would make it import the wrong packages.  It is
+        # also an MPI program (Debian's links Open MPI): what this process's MPI left in the environment
+        # (its PMIx server) would make pvpython's MPI start-up join it, which aborts it now and then.
+        from pdemfem.runtime import INHERITED_MPI_PREFIXES
+
+        environment = {key: value for key, value in os.environ.items()
+                       if key not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")
+                       and not key.startswith(INHERITED_MPI_PREFIXES)}
+        environment.setdefault("QT_QPA_PLATFORM", "offscreen")
+        if target.exists():
+            target.unlink()  # a stale picture must not pass for a new one
+        command = [pvpython, "--force-offscreen-rendering", str(PARAVIEW_SCRIPT), str(scratch / "job.json")]
+        with _virtual_display() as display:
+            try:
+                completed = subprocess.run(command, capture_output=True, text=True, timeout=PARAVIEW_SECONDS,
+                                           env={**environment, **display}, cwd=scratch)
+            except subprocess.TimeoutExpired:
+                raise ParaViewFailed(f"pvpython did not finish within {PARAVIEW_SECONDS} s") from None
+            except OSError as error:
+                raise ParaViewFailed(f"cannot run {pvpython}: {error.strerror}") from None
+        if completed.returncode != 0:
+            reason = _one_line(completed.stderr) or _one_line(completed.stdout)
+            if sys.platform.startswith("linux") and "DISPLAY" not in display and not os.environ.get("DISPLAY"):
+                reason += ("; " if reason else "") + ("there is no X display, which an X11 build of ParaView needs "
+                                                      "even offscreen: install Xvfb (apt-get install xvfb)")
+            raise ParaViewFailed(f"pvpython exited with status {completed.returncode}" + (f": {reason}" if reason else ""))
+        reports = [line for line in completed.stdout.splitlines() if line.startswith("{")]
+        if not reports or not target.is_file():
+            raise ParaViewFailed("pvpython wrote no picture" + (f": {_one_line(completed.stderr)}"
+                                                                if completed.stderr.strip() else ""))
+    size = _png_size(target)
+    if size != PICTURE_SIZE:
+        raise ParaViewFailed(f"pvpython wrote a {size[0]}x{size[1]} picture, not {PICTURE_SIZE[0]}x{PICTURE_SIZE[1]}")
+    return str(json.loads(reports[-1]).get("paraview", "")).strip()
+
+
+def _png_size(path: Path):
+    """(width, height) from a PNG's header (its IHDR chunk); (0, 0) for a file that is no PNG."""
+    header = path.read_bytes()[:24]
+    if header[:8] != b"\x89PNG\r\n\x1a\n":
+        return (0, 0)
+    return int.from_bytes(header[16:20], "big"), int.from_bytes(header[20:24], "big")
 
 
 # --------------------------------------------------------------------------- gallery
@@ -272,14 +511,28 @@ def _first_comment(path: Path) -> str:
     return " ".join(lines)
 
 
-def build_gallery(comm, runs_dir, examples=None, say=print) -> List[Path]:
+def build_gallery(comm, runs_dir, examples=None, say=print, renderer: str = "auto",
+                  pvpython: Optional[str] = None) -> List[Path]:
     """Run every example (collective over `comm`), draw each one's last step into GALLERY_DIR and
-    write GALLERY_PAGE.  Returns the pictures written (on rank 0; [] elsewhere)."""
+    write GALLERY_PAGE (naming the renderer that drew the pictures).  Returns the pictures written
+    (on rank 0; [] elsewhere)."""
     from pdemfem.simulation import Simulation
 
+    # A missing pvpython for --renderer paraview is reported before minutes of runs, on every rank.
+    executable = pvpython
+    if comm.rank == 0:
+        try:
+            executable = choose_renderer(renderer, pvpython)
+            failure = None
+        except PdemfemError as error:
+            failure = (error.where, error.problem, error.fix)
+    failure = comm.bcast(failure if comm.rank == 0 else None, root=0)
+    if failure is not None:
+        raise PdemfemError(*failure)
     paths = [Path(path) for path in examples] if examples else sorted(EXAMPLES_DIR.glob("*.yaml"))
     runs_dir = Path(runs_dir)
     written: List[Path] = []
+    drawn_by: List[str] = []
     for path in paths:
         output = runs_dir / path.stem
         say(f"running {path} -> {output}")
@@ -288,9 +541,11 @@ def build_gallery(comm, runs_dir, examples=None, say=print) -> List[Path]:
         failure = None
         if comm.rank == 0:
             try:
-                written.append(render_output(output, scene=path, target=GALLERY_DIR / f"{path.stem}.png",
-                                             title=path.stem))
-                say(f"wrote {written[-1]}")
+                picture, used = draw_output(output, scene=path, target=GALLERY_DIR / f"{path.stem}.png",
+                                            title=path.stem, renderer=renderer, pvpython=executable)
+                written.append(picture)
+                drawn_by.append(used)
+                say(f"wrote {picture} ({used})")
             except PdemfemError as error:
                 failure = (error.where, error.problem, error.fix)
         # Rank 0 draws while the others wait for the next example: all ranks stop on its error together.
@@ -298,22 +553,26 @@ def build_gallery(comm, runs_dir, examples=None, say=print) -> List[Path]:
         if failure is not None:
             raise PdemfemError(*failure)
     if comm.rank == 0 and not examples:
-        GALLERY_PAGE.write_text(_gallery_page(paths))
+        GALLERY_PAGE.write_text(_gallery_page(paths, drawn_by))
         say(f"wrote {GALLERY_PAGE}")
     return written
 
 
-def _gallery_page(paths) -> str:
+def _gallery_page(paths, drawn_by) -> str:
+    """The gallery page; each picture's renderer is named (once for all when one renderer drew them all)."""
+    same = len(set(drawn_by)) == 1
     lines = ["# Gallery", "",
              "<!-- Written by `pdemfem render --gallery`, which runs every examples/*.yaml and draws its last "
              "output step. -->", "",
              "The last output step of every example in `examples/`, as `pdemfem render --gallery` draws it",
              "(particles coloured by speed, solids by the magnitude of their displacement, walls translucent).",
+             *([f"These pictures were drawn by {drawn_by[0]}."] if same else []),
              "Run one yourself: `pdemfem run examples/<name>.yaml -o out/<name>`, then",
-             "`pdemfem render out/<name> --scene examples/<name>.yaml`, or open the XDMF files in ParaView",
-             "(docs/output.md).", ""]
-    for path in paths:
-        lines += [f"## {path.stem}", "", _first_comment(path), "",
+             "`pdemfem render out/<name> --scene examples/<name>.yaml`, or open the XDMF files in ParaView.",
+             "`pdemfem render` draws with ParaView (pvpython) when it is installed and with matplotlib",
+             "otherwise (`--renderer auto|paraview|matplotlib`; docs/output.md).", ""]
+    for path, used in zip(paths, drawn_by):
+        lines += [f"## {path.stem}", "", _first_comment(path) + ("" if same else f" (Drawn by {used}.)"), "",
                   f"![{path.stem}](img/gallery/{path.stem}.png)", "",
                   f"Scene: [examples/{path.name}](../examples/{path.name})", ""]
     return "\n".join(lines)
