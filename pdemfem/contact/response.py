@@ -162,7 +162,7 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
     return fx, fy, fz, mx, my, mz, elastic_energy, dissipated, normal_damping, tangential_damping
 
 
-@njit(cache=True)
+@njit(inline="always", cache=True)
 def rigid_wall_contact(composition, i, nx, ny, nz, distance, surface_vx, surface_vy, surface_vz, wall_row,
                        history, slot, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
                        coefficients, dt, forces, torques):
