@@ -1,8 +1,8 @@
 """Contact force kernels: sphere-sphere pairs from the Verlet list, and plane walls.
 
 The contact law is composed from the scene's sub-models (pdemfem.contact.response); the
-loops over pairs and walls are single numba calls per step, compiled for the scene's
-*composition* (a literal: pdemfem.contact.layout).  Sign conventions as in
+loops over pairs and walls are single numba calls per step, given the scene's
+*composition* (the sub-models it uses: pdemfem.contact.layout).  Sign conventions as in
 pdemfem.contact.response; every returned force/torque acts on i (the partner gets the
 opposite force).
 """

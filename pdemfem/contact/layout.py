@@ -8,7 +8,7 @@ stored as floats (small integers, exact).
 
 A contact's history (tangential spring, rolling spring, cohesive "touching" flag) is one row of
 ``HISTORY`` columns whose layout depends on the *composition*: the bit set of the sub-models a
-scene uses, passed to the kernels as a compile-time constant (numba ``literally``), so a scene
+scene uses, passed to the kernels with the table (a branch per sub-model, never taken when unused), so a scene
 without friction carries no tangential spring and runs no tangential code.
 """
 from __future__ import annotations

@@ -15,9 +15,9 @@ of its kind's signature (see the modules).  Kinds:
 The interaction key `model` names a normal model; `rolling_model` a rolling model.  To add a
 model: write its module and add it to the list of its kind below (docs/contact_models.md).
 
-Dispatch.  The kernels are compiled for a *composition* (pdemfem.contact.layout): the set of
-models a scene uses, a compile-time constant.  `normal_elastic` and friends test, model by
-model, the composition bit first (a constant: unused models are compiled out) and then the
+Dispatch.  The kernels get a *composition* (pdemfem.contact.layout): the set of models a scene
+uses.  `normal_elastic` and friends test, model by model, the composition bit first (the same on
+every contact: a predicted branch) and then the
 pair's code from the table; the last model in use takes every remaining code, so a scene with
 one normal model pays no test at all.
 """

@@ -7,8 +7,8 @@ their relative angular velocity; every returned force/moment acts on i (the part
 opposite).  The Verlet velocities are half-step values (v^{n+1/2}), so v dt is exactly the
 relative displacement of the step, which is what the springs need.
 
-`composition` is a compile-time constant (numba literal): the branches of unused sub-models
-are compiled out (pdemfem.contact.layout, pdemfem.contact.registry).
+`composition` (the scene's sub-models, pdemfem.contact.layout) gates every sub-model: the branches
+of unused ones are never taken (docs/contact_models.md measures what each costs).
 """
 from __future__ import annotations
 

@@ -27,7 +27,7 @@ from pdemfem.contact.registry import NORMAL_BY_NAME, ROLLING_BY_NAME, history_la
 class ContactTables:
     material_names: list                 # row names: the materials, then any solid-surface rows
     coefficients: np.ndarray             # (rows, rows, layout.COLUMNS)
-    composition: int                     # the sub-models in use (layout bits): the kernels' compile-time key
+    composition: int                     # the sub-models in use (layout bits): what the kernels run
     characteristic_speed: float          # impact speed that defines a derived linear stiffness
     solid_surface_rows: dict = field(default_factory=dict)  # solid name -> its own row (contact_modulus particle)
 
