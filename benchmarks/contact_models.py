@@ -5,9 +5,7 @@
 Part 1 (cost).  The settle benchmark's scene (benchmarks/settle.py: glass spheres poured into a box of
 plane walls) with each interaction variant: after --pre-steps (a bed with contacts), --steps are timed
 (best of --repeat, one process, same run).  Printed: wall time per step, contacts per step and the
-step time per contact relative to the first row.  "bookkeeping off" clears the energy bookkeeping bit
-of the composition (pdemfem.contact.layout.BOOKKEEPING), which only this benchmark does: it measures
-what the energy bookkeeping costs (the run monitor needs it in every run).
+step time per contact relative to the first row.
 
 Part 2 (JKR restitution).  Two equal spheres (R 1 mm, E 1e6 Pa, rho 1000) collide head-on at speed v
 with model jkr, restitution 0.5 and W = 0.05 J/m^2; printed: the rebound ratio (relative speed after /
@@ -32,26 +30,22 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import settle  # noqa: E402
 
 from pdemfem import Simulation  # noqa: E402
-from pdemfem.contact import layout  # noqa: E402
 
 VARIANTS = [
-    ("hertz_mindlin, friction 0.5 (settle default)", {}, False),
-    ("hertz_mindlin, frictionless (no tangential history)", {"friction": 0.0}, False),
-    ("+ rolling constant_torque, mu_r 0.1", {"rolling_friction": 0.1, "rolling_model": "constant_torque"}, False),
-    ("+ rolling elastic_plastic, mu_r 0.1", {"rolling_friction": 0.1, "rolling_model": "elastic_plastic"}, False),
-    ("linear_spring_dashpot, friction 0.5", {"model": "linear_spring_dashpot"}, False),
-    ("jkr W 0.02 J/m^2, friction 0.5", {"model": "jkr", "work_of_adhesion": 0.02}, False),
-    ("hertz_mindlin, friction 0.5, bookkeeping off", {}, True),
+    ("hertz_mindlin, friction 0.5 (settle default)", {}),
+    ("hertz_mindlin, frictionless (no tangential history)", {"friction": 0.0}),
+    ("+ rolling constant_torque, mu_r 0.1", {"rolling_friction": 0.1, "rolling_model": "constant_torque"}),
+    ("+ rolling elastic_plastic, mu_r 0.1", {"rolling_friction": 0.1, "rolling_model": "elastic_plastic"}),
+    ("linear_spring_dashpot, friction 0.5", {"model": "linear_spring_dashpot"}),
+    ("jkr W 0.02 J/m^2, friction 0.5", {"model": "jkr", "work_of_adhesion": 0.02}),
 ]
 
 
-def time_variant(changes: dict, bookkeeping_off: bool, args) -> dict:
+def time_variant(changes: dict, args) -> dict:
     scene = settle.scene_dict(args.particles)
     scene["interactions"]["default"].update(changes)
     with tempfile.TemporaryDirectory() as directory:
         sim = Simulation.from_dict(scene, output_dir=directory)
-        if bookkeeping_off:
-            sim.particle_system.tables.composition &= ~layout.BOOKKEEPING
         sim.step(args.pre_steps)
         best = math.inf
         contacts = []
@@ -99,8 +93,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     costs = []
-    for name, changes, off in VARIANTS:
-        result = time_variant(changes, off, args)
+    for name, changes in VARIANTS:
+        result = time_variant(changes, args)
         costs.append({"variant": name, **result})
     base = costs[0]["seconds_per_step"] / max(costs[0]["contacts_per_step"], 1.0)
     print(f"\nCost of the contact sub-models: {args.particles} spheres, {args.steps} timed steps after "

@@ -210,7 +210,7 @@ def test_cohesive_rolling_history_restarts_bit_identical_on_one_and_two_ranks(tm
     scene = restart_scenes.cohesive(restart_scenes.pile_scene(tmp_path / "probe", steps, EVERY))
     with restart_scenes.cross_rank_static_solve():
         probe = Simulation.from_dict(scene, base_dir=tmp_path)
-    assert probe.particle_system.tables.history_width == 7
+    assert probe.particle_system.tables.history_width == 8
     probe.run(progress=False)  # the step counts the tolerance needs
     assert_identical(results[1], restart_scenes.gather_state(probe))
     assert_close(results[1], results[2], round_off_tolerance(probe))

@@ -36,12 +36,11 @@ ROLLING_BITS = 9         # bit ROLLING_BITS + code - 1: that rolling model is us
 MAXIMUM_ROLLING_MODELS = 4
 ROLLING_ANY = ((1 << MAXIMUM_ROLLING_MODELS) - 1) << ROLLING_BITS
 COHESIVE = 1 << 13       # some normal model in use attracts beyond touching: a "touching" flag per contact
-BOOKKEEPING = 1 << 14    # energies booked (always set by a scene: the run monitor needs them; cleared only
-                         # by benchmarks/contact_models.py to measure what the bookkeeping costs)
 
 # ---- history columns (the order is fixed; a block is present only when its bit is set;
 #      pdemfem.contact.registry.history_layout)
 TANGENTIAL_COLUMNS = 3   # xi: the tangential spring's displacement (flips sign with the pair's order)
 ROLLING_COLUMNS = 3      # the rolling spring's moment on the first particle (flips sign)
+SPRING_ENERGY_COLUMNS = 1  # the springs' energy as booked at the last evaluation (symmetric)
 COHESIVE_COLUMNS = 1     # 1.0 while the contact is formed (symmetric)
 

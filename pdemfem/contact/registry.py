@@ -10,7 +10,8 @@ of its kind's signature (see the modules).  Kinds:
   DAMPING_LAW (which restitution calibration its dashpot uses);
 - tangential: `tangential_mindlin` (the only one; used when some pair has friction);
 - damping: `damping_viscous`;
-- rolling (`ROLLING_MODELS`): torque(...) -> (moment (3), elastic, dissipated), HISTORY_COLUMNS.
+- rolling (`ROLLING_MODELS`): torque(...) -> (moment (3), spring energy, work taken from the motion
+  minus that energy), HISTORY_COLUMNS.
 
 The interaction key `model` names a normal model; `rolling_model` a rolling model.  To add a
 model: write its module and add it to the list of its kind below (docs/contact_models.md).
@@ -28,7 +29,8 @@ from numba import njit
 from pdemfem.contact import (normal_hertz, normal_jkr, normal_linear, rolling_constant_torque,
                              rolling_elastic_plastic)
 from pdemfem.contact.layout import (COHESIVE, COHESIVE_COLUMNS, MAXIMUM_NORMAL_MODELS, MAXIMUM_ROLLING_MODELS,
-                                    NORMAL_BITS, ROLLING_BITS, ROLLING_COLUMNS, TANGENTIAL, TANGENTIAL_COLUMNS)
+                                    NORMAL_BITS, ROLLING_BITS, ROLLING_COLUMNS, SPRING_ENERGY_COLUMNS, TANGENTIAL,
+                                    TANGENTIAL_COLUMNS)
 
 NORMAL_MODELS = (
     normal_hertz,
@@ -66,7 +68,8 @@ ROLLING_HISTORY_BITS = sum(rolling_bit(model) for model in ROLLING_MODELS if mod
 
 @njit(inline="always", cache=True)
 def history_layout(composition):
-    """(tangential column, rolling column, touching column, width) of a contact's history; -1: absent."""
+    """(tangential column, rolling column, touching column, width) of a contact's history; -1: absent.
+    With springs, the column after them holds their energy as booked (`spring_energy_column`)."""
     column = 0
     tangential = -1
     rolling = -1
@@ -77,17 +80,33 @@ def history_layout(composition):
     if composition & ROLLING_HISTORY_BITS:
         rolling = column
         column += ROLLING_COLUMNS
+    if tangential >= 0 or rolling >= 0:
+        column += SPRING_ENERGY_COLUMNS
     if composition & COHESIVE:
         touching = column
         column += COHESIVE_COLUMNS
     return tangential, rolling, touching, column
 
 
+@njit(inline="always", cache=True)
+def spring_energy_column(composition):
+    """The column holding the energy the contact's springs were booked with at its last evaluation (-1: no
+    springs).  The next evaluation books the springs' energy change against it, and an opening contact
+    loses it, with no stiffness recomputed at the previous overlap."""
+    column = 0
+    if composition & TANGENTIAL:
+        column += TANGENTIAL_COLUMNS
+    if composition & ROLLING_HISTORY_BITS:
+        column += ROLLING_COLUMNS
+    return column - 1 + SPRING_ENERGY_COLUMNS if column > 0 else -1
+
+
 def history_signs(composition: int) -> tuple:
     """+1/-1 per history column: how it changes when the pair is seen from the other body (the
-    springs flip, the touching flag does not)."""
+    springs flip; their energy and the touching flag do not)."""
     tangential, rolling, touching, width = history_layout(composition)
-    return tuple(1.0 if column == touching else -1.0 for column in range(width))
+    energy = spring_energy_column(composition)
+    return tuple(1.0 if column in (touching, energy) else -1.0 for column in range(width))
 
 
 # ------------------------------------------------------------------ dispatch chains
@@ -143,7 +162,7 @@ def _rolling_chain(models, index):
     if index == len(models):
         @njit(inline="always")
         def none_left(model, composition, coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force,
-                      normal_stiffness, previous_normal_stiffness, effective_radius, effective_inertia, history,
+                      normal_stiffness, effective_radius, effective_inertia, history,
                       row, column, dt):
             return 0.0, 0.0, 0.0, 0.0, 0.0
         return none_left
@@ -155,35 +174,15 @@ def _rolling_chain(models, index):
 
     @njit(inline="always")
     def link(model, composition, coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness,
-             previous_normal_stiffness, effective_radius, effective_inertia, history, row, column, dt):
+             effective_radius, effective_inertia, history, row, column, dt):
         # Code 0 (no rolling resistance) never matches: a pair without it gets no torque.
         if composition & own_bit:
             if model == code:
                 return function(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness,
-                                previous_normal_stiffness, effective_radius, effective_inertia, history, row,
+                                effective_radius, effective_inertia, history, row,
                                 column, dt)
         return rest(model, composition, coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness,
-                    previous_normal_stiffness, effective_radius, effective_inertia, history, row, column, dt)
-    return link
-
-
-def _rolling_energy_chain(models, index):
-    if index == len(models):
-        @njit(inline="always")
-        def none_left(model, composition, coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
-            return 0.0
-        return none_left
-    function = models[index].spring_energy
-    code = models[index].CODE
-    own_bit = rolling_bit(models[index])
-    rest = _rolling_energy_chain(models, index + 1)
-
-    @njit(inline="always")
-    def link(model, composition, coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
-        if composition & own_bit:
-            if model == code:
-                return function(coefficients, a, b, normal_stiffness, effective_radius, history, row, column)
-        return rest(model, composition, coefficients, a, b, normal_stiffness, effective_radius, history, row, column)
+                    effective_radius, effective_inertia, history, row, column, dt)
     return link
 
 
@@ -191,4 +190,3 @@ normal_elastic = _normal_chain(NORMAL_MODELS, 0, "elastic", (0.0, 0.0, 0.0, 0.0)
 normal_pull_off_overlap = _pair_constant_chain(NORMAL_MODELS, 0, "pull_off_overlap")
 normal_friction_offset = _pair_constant_chain(NORMAL_MODELS, 0, "friction_offset")
 rolling_torque = _rolling_chain(ROLLING_MODELS, 0)
-rolling_spring_energy = _rolling_energy_chain(ROLLING_MODELS, 0)

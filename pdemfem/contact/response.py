@@ -16,9 +16,9 @@ from numba import njit
 
 from pdemfem.contact.damping_viscous import dashpot
 from pdemfem.contact import tangential_mindlin
-from pdemfem.contact.layout import BOOKKEEPING, COHESIVE, DAMPING, FRICTION, NORMAL_MODEL, ROLLING_ANY, ROLLING_MODEL
+from pdemfem.contact.layout import COHESIVE, DAMPING, FRICTION, NORMAL_MODEL, ROLLING_ANY, ROLLING_MODEL
 from pdemfem.contact.registry import (history_layout, normal_elastic, normal_friction_offset,
-                                      normal_pull_off_overlap, rolling_spring_energy, rolling_torque)
+                                      normal_pull_off_overlap, rolling_torque, spring_energy_column)
 
 
 @njit(inline="always", cache=True)
@@ -58,15 +58,14 @@ def released_energy(composition, coefficients, a, b, previous_overlap, effective
     """Energy a contact held at the previous step's overlap and loses when it opens: its springs'
     energy, and a cohesive contact's elastic energy (the adhesion hysteresis)."""
     tangential_column, rolling_column, touching_column, width = history_layout(composition)
-    normal_stiffness, tangential_stiffness, normal_energy = _previous_stiffnesses(
-        composition, int(coefficients[a, b, NORMAL_MODEL]), coefficients, a, b, previous_overlap, effective_mass,
-        effective_radius)
+    normal_energy = 0.0
+    if touching_column >= 0:
+        normal_energy = _previous_stiffnesses(composition, int(coefficients[a, b, NORMAL_MODEL]), coefficients, a, b,
+                                              previous_overlap, effective_mass, effective_radius)[2]
     released = 0.0
-    if tangential_column >= 0:
-        released += tangential_mindlin.spring_energy(tangential_stiffness, history, row, tangential_column)
-    if rolling_column >= 0:
-        released += rolling_spring_energy(int(coefficients[a, b, ROLLING_MODEL]), composition, coefficients, a, b,
-                                          normal_stiffness, effective_radius, history, row, rolling_column)
+    energy_column = spring_energy_column(composition)
+    if energy_column >= 0:
+        released += history[row, energy_column]
     # A cohesive contact breaks holding energy (the adhesion hysteresis); a repulsive one opens at
     # zero overlap, its elastic energy already returned to the motion.
     if touching_column >= 0 and history[row, touching_column] != 0.0 and pull_off_overlap(
@@ -119,19 +118,10 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
     fz = normal_force * nz
     tangential_damping = 0.0
 
-    previous_normal_stiffness = 0.0
-    previous_tangential_stiffness = 0.0
-    if composition & BOOKKEEPING and (tangential_column >= 0 or rolling_column >= 0):
-        # The springs' energy before this step (the force does not need it): v dt is the step's relative
-        # displacement, so the last step's overlap was overlap - approach dt.
-        in_use = False
-        for column in range(width):
-            if history[row, column] != 0.0:
-                in_use = True
-        if in_use:
-            previous_normal_stiffness, previous_tangential_stiffness, _ = _previous_stiffnesses(
-                composition, model, coefficients, a, b, overlap - approach_rate * dt, effective_mass,
-                effective_radius)
+    # The springs below book their work on the relative motion; their energy change is booked here against
+    # the energy they were booked with last time (kept in the history: nothing is recomputed).
+    energy_column = spring_energy_column(composition)
+    spring_energy_after = 0.0
 
     if tangential_column >= 0:
         friction = coefficients[a, b, FRICTION]
@@ -141,12 +131,12 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
                 load += normal_friction_offset(model, composition, coefficients, a, b, effective_radius)
             tangential_damping = dashpot(gamma, effective_mass, tangential_stiffness)
             tx, ty, tz, tangential_damping, spring_energy, tangential_dissipated = tangential_mindlin.force(
-                nx, ny, nz, vx, vy, vz, normal_speed, tangential_stiffness, previous_tangential_stiffness,
+                nx, ny, nz, vx, vy, vz, normal_speed, tangential_stiffness,
                 tangential_damping, friction * max(load, 0.0), history, row, tangential_column, dt)
             fx += tx
             fy += ty
             fz += tz
-            elastic_energy += spring_energy
+            spring_energy_after += spring_energy
             dissipated += tangential_dissipated
 
     mx = 0.0
@@ -155,10 +145,15 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
     if composition & ROLLING_ANY:
         mx, my, mz, rolling_energy, rolling_dissipated = rolling_torque(
             int(coefficients[a, b, ROLLING_MODEL]), composition, coefficients, a, b, nx, ny, nz, wx, wy, wz,
-            normal_force, normal_stiffness, previous_normal_stiffness, effective_radius, effective_inertia, history,
+            normal_force, normal_stiffness, effective_radius, effective_inertia, history,
             row, rolling_column, dt)
-        elastic_energy += rolling_energy
+        spring_energy_after += rolling_energy
         dissipated += rolling_dissipated
+    if energy_column >= 0:
+        # The sub-models booked their work minus their energy now; the energy they held before is released.
+        dissipated += history[row, energy_column]
+        history[row, energy_column] = spring_energy_after
+        elastic_energy += spring_energy_after
     return fx, fy, fz, mx, my, mz, elastic_energy, dissipated, normal_damping, tangential_damping
 
 

@@ -23,9 +23,8 @@ def parameters(interaction) -> tuple:
 
 
 @njit(inline="always", cache=True)
-def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, previous_normal_stiffness,
-           effective_radius, effective_inertia, history, row, column, dt):
-    """(moment on the first body (3), elastic energy, dissipated energy this step)."""
+def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, effective_radius, effective_inertia, history, row, column, dt):
+    """(moment on the first body (3), spring energy (none), work taken from the relative rolling)."""
     along_normal = wx * nx + wy * ny + wz * nz
     rx = wx - along_normal * nx
     ry = wy - along_normal * ny
@@ -40,8 +39,3 @@ def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stif
     scale = -moment / rolling_speed
     return scale * rx, scale * ry, scale * rz, 0.0, moment * rolling_speed * dt
 
-
-@njit(inline="always", cache=True)
-def spring_energy(coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
-    """Energy a contact's rolling spring holds (none: no spring)."""
-    return 0.0

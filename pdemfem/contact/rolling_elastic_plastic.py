@@ -34,20 +34,14 @@ def parameters(interaction) -> tuple:
 
 
 @njit(inline="always", cache=True)
-def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, previous_normal_stiffness,
-           effective_radius, effective_inertia, history, row, column, dt):
+def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, effective_radius, effective_inertia, history, row, column, dt):
     mu_r = coefficients[a, b, ROLLING_FRICTION]
     lever_squared = (mu_r * effective_radius) ** 2
     stiffness = STIFFNESS_FACTOR * lever_squared * normal_stiffness
-    previous_stiffness = STIFFNESS_FACTOR * lever_squared * previous_normal_stiffness
     mx = history[row, column]
     my = history[row, column + 1]
     mz = history[row, column + 2]
-    old_squared = mx * mx + my * my + mz * mz
-    energy_before = 0.0
-    if old_squared > 0.0:
-        if previous_stiffness > 0.0:
-            energy_before = 0.5 * old_squared / previous_stiffness
+    if mx != 0.0 or my != 0.0 or mz != 0.0:
         mx, my, mz = turn_into_tangent_plane(mx, my, mz, nx, ny, nz)
     along_normal = wx * nx + wy * ny + wz * nz
     rx = wx - along_normal * nx
@@ -73,14 +67,6 @@ def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stif
     total_x = mx - damping * rx
     total_y = my - damping * ry
     total_z = mz - damping * rz
-    dissipated = -(total_x * rx + total_y * ry + total_z * rz) * dt - (energy - energy_before)
-    return total_x, total_y, total_z, energy, dissipated
+    # Work taken from the relative rolling minus what the spring holds now (the caller books the before).
+    return total_x, total_y, total_z, energy, -(total_x * rx + total_y * ry + total_z * rz) * dt - energy
 
-
-@njit(inline="always", cache=True)
-def spring_energy(coefficients, a, b, normal_stiffness, effective_radius, history, row, column):
-    """|M_k|^2 / (2 k_r) at the normal stiffness S_n: what the spring loses when the contact opens."""
-    stiffness = STIFFNESS_FACTOR * (coefficients[a, b, ROLLING_FRICTION] * effective_radius) ** 2 * normal_stiffness
-    if stiffness <= 0.0:
-        return 0.0
-    return 0.5 * (history[row, column] ** 2 + history[row, column + 1] ** 2 + history[row, column + 2] ** 2) / stiffness

@@ -85,7 +85,7 @@ def build_contact_tables(scene, characteristic_speed: float, largest_radius: flo
                 rows.append((f"{solid.material} (surface of solid {solid.name})", solid.material, False))
     count = len(rows)
     coefficients = np.zeros((count, count, layout.COLUMNS))
-    composition = layout.BOOKKEEPING
+    composition = 0
     for a, (_, name_a, compliant_a) in enumerate(rows):
         for b, (_, name_b, compliant_b) in enumerate(rows):
             interaction = scene.interaction(name_a, name_b)

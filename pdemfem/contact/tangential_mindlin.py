@@ -20,9 +20,10 @@ HISTORY_COLUMNS = 3
 
 
 @njit(inline="always", cache=True)
-def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, previous_stiffness, damping, friction_limit,
+def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, damping, friction_limit,
           history, row, column, dt):
-    """(F_t (3), c_t in effect, spring energy after, spring energy before, dissipated this step); updates xi.
+    """(F_t (3), c_t in effect, spring energy after, work taken from the relative motion minus that energy);
+    updates xi.  The caller books the energy the spring had before (pdemfem.contact.response).
 
     c_t is 0 when the contact slides (the force is then not linear in v)."""
     tx = vx - normal_speed * nx
@@ -31,12 +32,8 @@ def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, previous_stiffness, d
     xi_x = history[row, column]
     xi_y = history[row, column + 1]
     xi_z = history[row, column + 2]
-    old_length_squared = xi_x * xi_x + xi_y * xi_y + xi_z * xi_z
-    energy_before = 0.0
-    if old_length_squared > 0.0:
+    if xi_x != 0.0 or xi_y != 0.0 or xi_z != 0.0:
         xi_x, xi_y, xi_z = turn_into_tangent_plane(xi_x, xi_y, xi_z, nx, ny, nz)
-        # The energy booked last step used last step's stiffness (Hertz: S_t ~ sqrt(delta)).
-        energy_before = 0.5 * previous_stiffness * (xi_x * xi_x + xi_y * xi_y + xi_z * xi_z)
     xi_x += tx * dt
     xi_y += ty * dt
     xi_z += tz * dt
@@ -62,13 +59,6 @@ def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, previous_stiffness, d
     history[row, column + 1] = xi_y
     history[row, column + 2] = xi_z
     energy = 0.5 * stiffness * (xi_x * xi_x + xi_y * xi_y + xi_z * xi_z)
-    # Work taken from the relative motion minus what the spring stored.
-    dissipated = -(fx * tx + fy * ty + fz * tz) * dt - (energy - energy_before)
-    return fx, fy, fz, damping, energy, dissipated
+    # Work taken from the relative motion minus what the spring holds now.
+    return fx, fy, fz, damping, energy, -(fx * tx + fy * ty + fz * tz) * dt - energy
 
-
-@njit(inline="always", cache=True)
-def spring_energy(stiffness, history, row, column):
-    """1/2 S_t |xi|^2: what a contact that opens with a loaded spring loses."""
-    xi_squared = history[row, column] ** 2 + history[row, column + 1] ** 2 + history[row, column + 2] ** 2
-    return 0.5 * stiffness * xi_squared
