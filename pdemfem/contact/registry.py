@@ -137,7 +137,8 @@ def _normal_chain(models, index, function_name, zero):
 
 
 def _pair_constant_chain(models, index, function_name):
-    """Like _normal_chain for the functions of (coefficients, a, b, R*) -> float."""
+    """Like _normal_chain for the functions of (coefficients, a, b, R*) -> float.  (One generic chain with
+    *arguments would serve all three, but numba's IR inlining does not take star arguments.)"""
     if index == len(models):
         @njit(inline="always")
         def none_left(model, composition, coefficients, a, b, effective_radius):
@@ -169,7 +170,6 @@ def _rolling_chain(models, index):
     function = models[index].torque
     code = models[index].CODE
     own_bit = rolling_bit(models[index])
-    later = _later_mask(models, index, rolling_bit)
     rest = _rolling_chain(models, index + 1)
 
     @njit(inline="always")

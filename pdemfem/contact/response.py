@@ -40,37 +40,22 @@ def history_in_use(composition, history, row):
     return False
 
 
-@njit(inline="always", cache=True)
-def _previous_stiffnesses(composition, model, coefficients, a, b, previous_overlap, effective_mass,
-                          effective_radius):
-    """(S_n, S_t, elastic energy) at the previous step's overlap; zeros when it was not a contact."""
-    if previous_overlap > 0.0 or (composition & COHESIVE and previous_overlap > pull_off_overlap(
-            composition, coefficients, a, b, effective_radius)):
-        force, normal_stiffness, tangential_stiffness, energy = normal_elastic(
-            model, composition, previous_overlap, coefficients, a, b, effective_mass, effective_radius)
-        return normal_stiffness, tangential_stiffness, energy
-    return 0.0, 0.0, 0.0
-
-
 @njit(cache=True)
 def released_energy(composition, coefficients, a, b, previous_overlap, effective_mass, effective_radius,
                     history, row):
     """Energy a contact held at the previous step's overlap and loses when it opens: its springs'
     energy, and a cohesive contact's elastic energy (the adhesion hysteresis)."""
-    tangential_column, rolling_column, touching_column, width = history_layout(composition)
-    normal_energy = 0.0
-    if touching_column >= 0:
-        normal_energy = _previous_stiffnesses(composition, int(coefficients[a, b, NORMAL_MODEL]), coefficients, a, b,
-                                              previous_overlap, effective_mass, effective_radius)[2]
     released = 0.0
     energy_column = spring_energy_column(composition)
     if energy_column >= 0:
         released += history[row, energy_column]
-    # A cohesive contact breaks holding energy (the adhesion hysteresis); a repulsive one opens at
-    # zero overlap, its elastic energy already returned to the motion.
+    # A cohesive contact breaks holding energy (the adhesion hysteresis): its elastic energy at the last
+    # overlap it held; a repulsive one opens at zero overlap, its elastic energy already returned to the motion.
+    touching_column = history_layout(composition)[2]
     if touching_column >= 0 and history[row, touching_column] != 0.0 and pull_off_overlap(
             composition, coefficients, a, b, effective_radius) < 0.0:
-        released += normal_energy
+        released += normal_elastic(int(coefficients[a, b, NORMAL_MODEL]), composition, previous_overlap, coefficients,
+                                   a, b, effective_mass, effective_radius)[3]
     return released
 
 
