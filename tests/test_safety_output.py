@@ -13,24 +13,10 @@ from mpi4py import MPI
 from pdemfem import cli
 from pdemfem.errors import CheckpointError, OutputError
 from pdemfem.io import checkpoint as ckpt
+from test_cli import SCENE as CLI_SCENE
 
-SCENE = """\
-time: {end: 0.002, dt: auto, dt_factor: 0.1}
-materials:
-  glass: {density: 2500, youngs_modulus: 5.0e6, poisson_ratio: 0.3}
-particles:
-  - name: grains
-    material: glass
-    radius: 0.001
-    insert:
-      kind: lattice
-      region: {box: [[0, 0, 0], [0.01, 0.01, 0.01]]}
-      count: 20
-walls:
-  - {name: floor, kind: plane, point: [0, 0, 0], normal: [0, 0, 1], material: glass}
-output: {dir: results, every: 0.001}
-checkpoint: {every: 0.001, keep: 2}
-"""
+# The command-line tests' scene (20 grains on a floor), checkpointing every output step.
+SCENE = CLI_SCENE + "checkpoint: {every: 0.001, keep: 2}\n"
 
 
 @pytest.fixture
