@@ -52,6 +52,17 @@ def fit_range(lookup, reader, name):
     lookup.AutomaticRescaleRangeMode = "Never"
 
 
+def color_by_magnitude(display, reader, view, name, preset, title, bars):
+    """Colour `display` by the magnitude of point array `name` (fit_range) with its legend as the
+    bars-th one; returns the number of legends now shown."""
+    ColorBy(display, ("POINTS", name, "Magnitude"))
+    lookup = GetColorTransferFunction(name)
+    lookup.ApplyPreset(preset, True)
+    fit_range(lookup, reader, name)
+    lookup_bar(view, lookup, title, bars)
+    return bars + 1
+
+
 def main(job_file):
     with open(job_file) as handle:
         job = json.load(handle)
@@ -87,12 +98,8 @@ def main(job_file):
         surface.UpdatePipeline(solid_time)
         display = Show(surface, view)
         if "displacements" in point_array_names(reader):
-            ColorBy(display, ("POINTS", "displacements", "Magnitude"))
-            lookup = GetColorTransferFunction("displacements")
-            lookup.ApplyPreset("Plasma (matplotlib)", True)
-            fit_range(lookup, reader, "displacements")
-            lookup_bar(view, lookup, "displacement [m]", bars)
-            bars += 1
+            bars = color_by_magnitude(display, reader, view, "displacements", "Plasma (matplotlib)",
+                                      "displacement [m]", bars)
         display.EdgeColor = [0.2, 0.2, 0.2]
         time = solid_time if time is None else max(time, solid_time)
         report["solids"].append(servermanager.Fetch(surface).GetNumberOfCells())
@@ -116,12 +123,8 @@ def main(job_file):
         glyphs.UpdatePipeline(particle_time)
         display = Show(glyphs, view)
         if "velocities" in names:
-            ColorBy(display, ("POINTS", "velocities", "Magnitude"))
-            lookup = GetColorTransferFunction("velocities")
-            lookup.ApplyPreset("Viridis (matplotlib)", True)
-            fit_range(lookup, reader, "velocities")
-            lookup_bar(view, lookup, "speed [m/s]", bars)
-            bars += 1
+            bars = color_by_magnitude(display, reader, view, "velocities", "Viridis (matplotlib)", "speed [m/s]",
+                                      bars)
         else:
             display.ColorArrayName = ["POINTS", ""]
             display.AmbientColor = display.DiffuseColor = [0.12, 0.47, 0.71]
