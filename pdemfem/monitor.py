@@ -21,6 +21,9 @@ statement of physics (docs/stability.md lists them):
    available since the baseline: its kinetic, rotational, elastic and solid energies at
    the baseline, the largest drop of its potentials seen since, and the work moving walls
    did.  An integration that creates more energy than the scene ever had is diverging.
+5. Thermal step (heat on): the explicit temperature update is stable and overshoot-free while
+   dt sum(H) / (m c) <= 1 for every particle (pdemfem.particles.heat); past that the run stops.
+   Heat content is not part of the energy test (it is conserved on its own, see docs/heat.md).
 
 Scenes whose bookkeeping cannot be closed skip test 4 (logged once): solids with a
 prescribed velocity or displacement (their work is not tracked), and gravity along a
@@ -56,6 +59,15 @@ def total_energy(energies: dict) -> float:
             + energies["elastic_energy"] + energies["dissipated_energy"] - energies["wall_work"]
             + energies.get("solid_kinetic_energy", 0.0) + energies.get("solid_strain_energy", 0.0)
             + energies.get("solid_load_potential", 0.0))
+
+
+# Heat content (m c T, relative to 0 K) is orders of magnitude above the mechanical energies and
+# conserved on its own: it neither enters the bookkeeping total nor its round-off floor.
+_THERMAL = ("thermal_energy", "particle_thermal_energy")
+
+
+def _mechanical_magnitude(energies: dict) -> float:
+    return sum(abs(value) for name, value in energies.items() if name not in _THERMAL)
 
 
 class DivergenceMonitor:
@@ -114,7 +126,7 @@ class DivergenceMonitor:
             "wall_work": energies["wall_work"],
             "lost": system.lost_particles,
             "step": self.sim.step_count,
-            "magnitude": sum(abs(value) for value in energies.values()),
+            "magnitude": _mechanical_magnitude(energies),
         }
         self.lowest_potential = self.baseline["potential"]
 
@@ -149,6 +161,14 @@ class DivergenceMonitor:
                        f"a particle moved at {fastest:.3g} m/s, "
                        f"{fastest * sim.dt / self.smallest_radius:.3g} radii in one step (more than the smallest "
                        f"radius: contacts are missed)")
+        if problem is None and system.heat and system.largest_heat_step_ratio > 1.0:
+            raise SolverError(
+                f"run stopped at step {sim.step_count} (t = {sim.time:.6g} s)",
+                f"the temperature update is unstable: dt sum(H) / (m c) reached {system.largest_heat_step_ratio:.3g} "
+                f"on a particle (it must stay <= 1: its contacts' conductance H moves more heat per step than it "
+                f"holds)",
+                "lower time.dt, or raise the particles' heat_capacity (or lower their conductivity); "
+                "`pdemfem check` estimates the thermal step limit (docs/heat.md)")
         if problem is None and self.energy_check_skipped is None:
             problem = self._energy_problem(energies)
         if problem is None:
@@ -168,7 +188,7 @@ class DivergenceMonitor:
         available = (baseline["stored"] + (baseline["potential"] - self.lowest_potential)
                      + abs(energies["wall_work"] - baseline["wall_work"]))
         created = total_energy(energies) - baseline["total"]
-        floor = ROUND_OFF * max(baseline["magnitude"], sum(abs(value) for value in energies.values()))
+        floor = ROUND_OFF * max(baseline["magnitude"], _mechanical_magnitude(energies))
         if created > available + floor:
             return (f"the simulation diverged: the energy total grew by {created:.3g} J, more than the "
                     f"{available:.3g} J of kinetic, elastic and potential energy and wall work the scene had "

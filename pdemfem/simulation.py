@@ -24,6 +24,7 @@ from pdemfem.io.history import IntervalMean
 from pdemfem.io.simulation_io import SimulationIO
 from pdemfem.monitor import DivergenceMonitor
 from pdemfem.parallel.api_safety import collective_errors, private_communicators
+from pdemfem.particles.heat import material_heat_capacities
 from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
@@ -118,7 +119,9 @@ class Simulation:
         group_material = np.array([tables.material_names.index(group.material) for group in scene.particles],
                                   dtype=np.int32)
         group_density = np.array([scene.materials[group.material].density for group in scene.particles])
-        group_temperature = np.array([group.initial_temperature or 0.0 for group in scene.particles])
+        heat = scene.heat_enabled
+        group_temperature = np.array([scene.heat.default_temperature if group.initial_temperature is None
+                                      else group.initial_temperature for group in scene.particles])
         total = len(inserted.radii)
         self.inserted_count = total
         # Every rank places all particles identically (ids = insertion order) and keeps an
@@ -134,7 +137,8 @@ class Simulation:
             positions=inserted.positions[mine],
             velocities=inserted.velocities[mine],
             angular_velocities=inserted.angular_velocities[mine],
-            temperatures=group_temperature[groups] if total else np.zeros(0),
+            # Heat off: no temperature is allocated, moved, checkpointed or written.
+            temperatures=(group_temperature[groups] if total else np.zeros(0)) if heat else None,
             wall_count=len(plane_walls),
             history_width=tables.history_width,
         )
@@ -156,7 +160,8 @@ class Simulation:
         return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm,
                               contributors=self.contributor_walls,
                               domain_box=scene.domain.box, periodic_axes=scene.domain.periodic,
-                              rebalance_threshold=scene.parallel.rebalance_threshold)
+                              rebalance_threshold=scene.parallel.rebalance_threshold,
+                              heat_capacities=material_heat_capacities(scene, tables.material_names) if heat else None)
 
     def _build_solids(self) -> dict:
         """Deformable solids, each starting in static equilibrium under its constant loads."""
@@ -277,6 +282,9 @@ class Simulation:
                    "elastic_energy", "dissipated_energy", "wall_work", "contacts", "lost_particles"]
         if self.solids:
             columns += ["solid_kinetic_energy", "solid_strain_energy", "solid_load_potential"]
+        if self.particle_system.heat:
+            columns += ["thermal_energy", "particle_thermal_energy"]
+            columns += [f"heat_{name}" for name in self.particle_system.heat_ledger.names]
         for name in self._surface_names():
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
         for name in self._surface_names():
@@ -292,6 +300,8 @@ class Simulation:
                "lost_particles": system.lost_particles,
                "contacts": system.contact_count}
         row.update(self.energies())
+        if system.heat:
+            row.update(self.heat_given())
         names = self._surface_names()
         instantaneous = [self.wall_force(name) for name in names]
         # Before the first step of a run (or of a restart) no step has been averaged: the forces now.
@@ -332,7 +342,7 @@ class Simulation:
             velocities=state.velocities[first:last].copy(),
             angular_velocities=state.angular_velocities[first:last].copy(),
             forces=state.forces[first:last].copy(),
-            temperatures=state.temperatures[first:last].copy(),
+            temperatures=None if state.temperatures is None else state.temperatures[first:last].copy(),
         )
 
     def particle_count(self) -> int:
@@ -372,7 +382,19 @@ class Simulation:
         # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
         energies["solid_load_potential"] = -sum(solid.constant_load_vec.dot(solid.displacement_vec)
                                                 for solid in self.solids.values())
+        if self.particle_system.heat:
+            # Heat content m c T [J] (relative to 0 K) of the particles, and of the solids that conduct.
+            particle_heat = self.particle_system.thermal_energy
+            energies["particle_thermal_energy"] = particle_heat
+            energies["thermal_energy"] = particle_heat + sum(
+                solid.thermal_energy() for solid in self.solids.values() if getattr(solid, "heat", None) is not None)
         return energies
+
+    def heat_given(self) -> dict:
+        """Collective: heat_<name> [J], the heat each wall or solid surface has given the particles since the
+        start (negative: the particles heated it)."""
+        ledger = self.particle_system.heat_ledger
+        return {f"heat_{name}": float(value) for name, value in zip(ledger.names, ledger.settle(self.comm))}
 
     def dashpot_dissipation(self) -> float:
         """Collective: energy [J] the contact dashpots on solid surfaces dissipated beyond what the contact

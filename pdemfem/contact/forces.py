@@ -12,7 +12,8 @@ import math
 
 from numba import njit
 
-from pdemfem.contact.layout import COHESIVE
+from pdemfem.contact.conduction import contact_conductance
+from pdemfem.contact.layout import COHESIVE, HEAT
 from pdemfem.contact.registry import history_layout
 from pdemfem.contact.response import (clear_history, cohesive_contact_holds, contact_response, released_energy,
                                       rigid_wall_contact)
@@ -21,8 +22,11 @@ from pdemfem.contact.response import (clear_history, cohesive_contact_holds, con
 @njit(cache=True)
 def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history, ids, owned_count,
                 positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
-                coefficients, composition, dt, forces, torques):
+                coefficients, composition, dt, forces, torques, temperatures, heat_flows):
     """Add the forces of all sphere-sphere contacts of the half list (row r is particle row_particles[r]).
+
+    With heat on (composition), every contact also conducts: heat_flows[i] gets (Q, H) and the partner
+    (-Q, H) (pdemfem.particles.heat); temperatures and heat_flows are unused (may be empty) otherwise.
 
     A pair with a ghost is computed on both ranks that own one of its particles
     (each keeps the force on its own particle); its energy and count are booked
@@ -134,14 +138,26 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             torques[j, 0] += -lever_j * cx - mx
             torques[j, 1] += -lever_j * cy - my
             torques[j, 2] += -lever_j * cz - mz
+            if composition & HEAT:
+                conductance = contact_conductance(composition, coefficients, material_i, material_j, overlap,
+                                                  effective_mass, effective_radius)
+                flow = conductance * (temperatures[j] - temperatures[i])
+                heat_flows[i, 0] += flow
+                heat_flows[i, 1] += conductance
+                heat_flows[j, 0] -= flow
+                heat_flows[j, 1] += conductance
     return elastic_total, dissipated_total, contacts
 
 
 @njit(cache=True)
 def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_normals, wall_velocities,
                       wall_material, wall_history, positions, velocities, angular_velocities, radii, mass,
-                      inverse_inertia, material_index, coefficients, composition, dt, forces, torques, wall_forces):
+                      inverse_inertia, material_index, coefficients, composition, dt, forces, torques, wall_forces,
+                      temperatures, heat_flows, wall_temperatures, wall_heat):
     """Add the forces of the candidate (particle, plane wall) pairs.
+
+    With heat on, a wall with a temperature (wall_temperatures[w], NaN: adiabatic) conducts to the
+    particles touching it; wall_heat[w] accumulates the heat [J] the wall gives the particles (flow x dt).
 
     Candidates are the owned particles within reach of a wall at the last list build (every
     other pair cannot touch before the next one).  A wall is a flat rigid body (R = inf,
@@ -197,4 +213,13 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
         wall_forces[w, 0] -= fx
         wall_forces[w, 1] -= fy
         wall_forces[w, 2] -= fz
+        if composition & HEAT:
+            wall_temperature = wall_temperatures[w]
+            if wall_temperature == wall_temperature:  # NaN: an adiabatic wall
+                conductance = contact_conductance(composition, coefficients, material_index[i], wall_material[w],
+                                                  overlap, mass[i], radius)
+                flow = conductance * (wall_temperature - temperatures[i])
+                heat_flows[i, 0] += flow
+                heat_flows[i, 1] += conductance
+                wall_heat[w] += flow * dt
     return elastic_total, dissipated_total, contacts

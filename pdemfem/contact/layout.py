@@ -26,7 +26,8 @@ NORMAL_PARAMETERS = 8        # first of NORMAL_PARAMETER_COUNT columns owned by 
 NORMAL_PARAMETER_COUNT = 4
 ROLLING_PARAMETERS = NORMAL_PARAMETERS + NORMAL_PARAMETER_COUNT
 ROLLING_PARAMETER_COUNT = 2
-COLUMNS = ROLLING_PARAMETERS + ROLLING_PARAMETER_COUNT
+CONTACT_CONDUCTIVITY = ROLLING_PARAMETERS + ROLLING_PARAMETER_COUNT  # k* = 2 k_a k_b / (k_a + k_b) [W/(m K)]
+COLUMNS = CONTACT_CONDUCTIVITY + 1
 
 # ---- composition bits (which sub-models a scene's kernels are compiled with)
 NORMAL_BITS = 0          # bit NORMAL_BITS + code: that normal model is used by some pair
@@ -36,6 +37,7 @@ ROLLING_BITS = 9         # bit ROLLING_BITS + code - 1: that rolling model is us
 MAXIMUM_ROLLING_MODELS = 4
 ROLLING_ANY = ((1 << MAXIMUM_ROLLING_MODELS) - 1) << ROLLING_BITS
 COHESIVE = 1 << 13       # some normal model in use attracts beyond touching: a "touching" flag per contact
+HEAT = 1 << 14           # heat is on: contacts conduct (pdemfem.contact.conduction), no history needed
 
 # ---- history columns (the order is fixed; a block is present only when its bit is set;
 #      pdemfem.contact.registry.history_layout)

@@ -94,6 +94,13 @@ def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
 
 
 @njit(inline="always", cache=True)
+def conduction_radius(overlap, coefficients, a, b, effective_mass, effective_radius):
+    """The radius of the contact area heat flows through: the JKR a(delta) (finite down to delta_c)."""
+    return contact_radius(overlap, coefficients[a, b, WORK_OF_ADHESION], coefficients[a, b, EFFECTIVE_MODULUS],
+                          effective_radius)
+
+
+@njit(inline="always", cache=True)
 def pull_off_overlap(coefficients, a, b, effective_radius):
     work = coefficients[a, b, WORK_OF_ADHESION]
     modulus = coefficients[a, b, EFFECTIVE_MODULUS]

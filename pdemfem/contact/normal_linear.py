@@ -43,6 +43,12 @@ def elastic(overlap, coefficients, a, b, effective_mass, effective_radius):
             0.5 * stiffness * overlap * overlap)
 
 
+@njit(inline="always", cache=True)
+def conduction_radius(overlap, coefficients, a, b, effective_mass, effective_radius):
+    """The radius of the contact area heat flows through: Hertz's a = sqrt(R* delta)."""
+    return math.sqrt(effective_radius * overlap) if overlap > 0.0 else 0.0
+
+
 # Not cohesive: a contact opens at zero overlap and friction sees F_n alone.
 pull_off_overlap = no_pull_off
 friction_offset = no_pull_off

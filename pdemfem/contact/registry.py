@@ -5,7 +5,8 @@ of its kind's signature (see the modules).  Kinds:
 
 - normal (`NORMAL_MODELS`): elastic(overlap, coefficients, a, b, m*, R*) -> (F, S_n, S_t, energy),
   pull_off_overlap(...) -> the overlap at which a formed contact breaks (0 or negative),
-  friction_offset(...) -> the load added to F_n in the Coulomb limit; and on the host
+  friction_offset(...) -> the load added to F_n in the Coulomb limit, conduction_radius(overlap, ...) -> the
+  radius of the contact area heat flows through (pdemfem.contact.conduction); and on the host
   parameters(interaction, E*, v) -> its parameter block, pull_off_distance(...), COHESIVE,
   DAMPING_LAW (which restitution calibration its dashpot uses);
 - tangential: `tangential_mindlin` (the only one; used when some pair has friction);
@@ -187,6 +188,7 @@ def _rolling_chain(models, index):
 
 
 normal_elastic = _normal_chain(NORMAL_MODELS, 0, "elastic", (0.0, 0.0, 0.0, 0.0))
+normal_conduction_radius = _normal_chain(NORMAL_MODELS, 0, "conduction_radius", 0.0)
 normal_pull_off_overlap = _pair_constant_chain(NORMAL_MODELS, 0, "pull_off_overlap")
 normal_friction_offset = _pair_constant_chain(NORMAL_MODELS, 0, "friction_offset")
 rolling_torque = _rolling_chain(ROLLING_MODELS, 0)

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pdemfem.contact import damping_viscous, layout
+from pdemfem.contact import conduction, damping_viscous, layout
 from pdemfem.contact.registry import NORMAL_BY_NAME, ROLLING_BY_NAME, history_layout, normal_bit, rolling_bit
 
 
@@ -74,7 +74,9 @@ def _compliances(material) -> tuple:
 
 
 def build_contact_tables(scene, characteristic_speed: float, largest_radius: float = 0.0) -> ContactTables:
-    """The packed table of `scene`; `largest_radius` [m] bounds the reach of cohesive pairs."""
+    """The packed table of `scene`; `largest_radius` [m] bounds the reach of cohesive pairs.  With heat on
+    (scene.heat_enabled) every contact also conducts (pdemfem.contact.conduction)."""
+    heat = scene.heat_enabled
     # Each row: (name, material name for the interaction, does the row's body add its compliance to E*, G*).
     rows = [(name, name, True) for name in scene.materials]
     surface_rows = {}
@@ -110,6 +112,9 @@ def build_contact_tables(scene, characteristic_speed: float, largest_radius: flo
             assert len(parameters) <= layout.NORMAL_PARAMETER_COUNT
             row[layout.NORMAL_PARAMETERS:layout.NORMAL_PARAMETERS + len(parameters)] = parameters
             composition |= normal_bit(normal_model)
+            if heat:
+                row[layout.CONTACT_CONDUCTIVITY] = conduction.pair_conductivity(
+                    scene.materials[name_a].conductivity, scene.materials[name_b].conductivity)
             if normal_model.COHESIVE:
                 composition |= layout.COHESIVE
                 row[layout.COHESION_REACH] = normal_model.pull_off_distance(
@@ -123,6 +128,8 @@ def build_contact_tables(scene, characteristic_speed: float, largest_radius: flo
                 assert len(rolling_parameters) <= layout.ROLLING_PARAMETER_COUNT
                 row[layout.ROLLING_PARAMETERS:layout.ROLLING_PARAMETERS + len(rolling_parameters)] = rolling_parameters
                 composition |= rolling_bit(rolling_model)
+    if heat:
+        composition |= layout.HEAT
     return ContactTables(material_names=[row[0] for row in rows], coefficients=coefficients,
                          composition=int(composition), characteristic_speed=float(characteristic_speed),
                          solid_surface_rows=surface_rows)

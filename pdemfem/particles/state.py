@@ -62,7 +62,6 @@ CORE_FIELDS = (
     _core("positions", periodic_shift=True, **_GHOST_STEP),
     _core("velocities", **_GHOST_STEP),
     _core("angular_velocities", **_GHOST_STEP),
-    _core("temperatures", **_GHOST),
     # Tangential spring of each particle against each analytic wall.
     _core("wall_history"),
     # The last step's loads: recomputed after every migration, but a checkpoint keeps them
@@ -71,6 +70,11 @@ CORE_FIELDS = (
     _core("torques", migrate=False),
     _core("positions_at_build", migrate=False, checkpoint=False),
 )
+# With heat on (pdemfem.particles.heat): the temperature travels, is refreshed on ghosts every step
+# (the pair kernel reads the partner's), and is checkpointed; the step's heat flow [W] and the sum of
+# the conductances [W/K] of each row's contacts are recomputed every step.  Without heat neither exists.
+TEMPERATURE_FIELD = FieldSpec("temperatures", ghost_rebuild=True, ghost_step=True)
+HEAT_FLOW_FIELD = FieldSpec("heat_flows", migrate=False, checkpoint=False)
 # Fields that define a particle and move with it between ranks.
 MIGRATING_FIELDS = tuple(spec.name for spec in CORE_FIELDS if spec.migrate)
 
@@ -79,7 +83,7 @@ class ParticleState(kinds.StateComponent):
     """Spheres: identity, material, size, kinematics, loads and contact history."""
 
     def __init__(self, ids, material_index, radii, densities, positions, velocities, angular_velocities,
-                 temperatures, wall_count: int, history_width: int = 3):
+                 temperatures=None, wall_count: int = 0, history_width: int = 3):
         count = len(ids)
         self.ids = np.ascontiguousarray(ids, dtype=np.int64)
         self.material_index = np.ascontiguousarray(material_index, dtype=np.int32)
@@ -91,7 +95,6 @@ class ParticleState(kinds.StateComponent):
         self.positions = np.ascontiguousarray(positions, dtype=np.float64).reshape(count, 3)
         self.velocities = np.ascontiguousarray(velocities, dtype=np.float64).reshape(count, 3)
         self.angular_velocities = np.ascontiguousarray(angular_velocities, dtype=np.float64).reshape(count, 3)
-        self.temperatures = np.ascontiguousarray(temperatures, dtype=np.float64)
         # Contact history (pdemfem.contact.registry.history_layout) of each particle against each plane wall.
         self.wall_history = np.zeros((count, max(wall_count, 1), history_width))
         self.forces = np.zeros((count, 3))
@@ -101,6 +104,20 @@ class ParticleState(kinds.StateComponent):
         self.registry_version = 0  # bumped when a field is added or removed (the ghost scatter re-plans)
         self.fields = {}  # the arrays of the fields registered with add_field
         self.owned_count = count
+        if temperatures is not None:
+            self.add_field(TEMPERATURE_FIELD.name, **TEMPERATURE_FIELD.flags())[:] = temperatures
+            self.add_field(HEAT_FLOW_FIELD.name, (2,), **HEAT_FLOW_FIELD.flags())
+
+    @property
+    def temperatures(self):
+        """Temperature [K] per row (owned, then ghosts); None when heat is off."""
+        return self.fields.get(TEMPERATURE_FIELD.name)
+
+    @property
+    def heat_flows(self):
+        """Per row, this step: heat flowing in [W] (column 0) and the sum of its contacts' conductances [W/K]
+        (column 1, the thermal step check); None when heat is off."""
+        return self.fields.get(HEAT_FLOW_FIELD.name)
 
     # ------------------------------------------------------------ fields
     def add_field(self, name: str, tail_shape: tuple = (), dtype=np.float64, fill=0, *, migrate: bool = True,

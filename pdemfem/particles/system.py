@@ -15,6 +15,8 @@ as *contributors*: objects with
   add_forces(system, first, last)        add contact forces of owned particles [first, last) to
                                          system.state.forces/torques; return (elastic, dissipated, contacts)
   reduce(comm)                           sum the body's rank-local totals (called when comm.size > 1)
+  step_heat                              with heat on: heat [J] the body gave this rank's particles in
+                                         the last add_forces (read after it)
 Their per-particle contact history lives in state.fields (ParticleState.add_field),
 so it is reordered and migrated with the particles.
 """
@@ -35,6 +37,7 @@ from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import Decomposition, recursive_bisection
 from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.particles.energy import particle_energy_sums
+from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES, HeatLedger, heat_content, update_temperatures
 from pdemfem.particles.integrate import drift, kick
 
 log = logging.getLogger("pdemfem")
@@ -45,7 +48,9 @@ REORDER_FRACTION = 0.1
 
 class ParticleSystem(kinds.StateComponent):
     def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm, contributors=(),
-                 domain_box=None, periodic_axes=(), rebalance_threshold: float = 1.2):
+                 domain_box=None, periodic_axes=(), rebalance_threshold: float = 1.2, heat_capacities=None):
+        """heat_capacities: c [J/(kg K)] per contact-table row, needed when the tables' composition has
+        heat on (pdemfem.particles.heat); the state then carries temperatures."""
         self.state = state
         self.walls = walls
         self.tables = tables
@@ -54,6 +59,17 @@ class ParticleSystem(kinds.StateComponent):
         self.skin = float(skin)
         self.comm = comm
         self.contributors = list(contributors)
+        self.heat = bool(tables.composition & layout.HEAT)
+        if self.heat and (state.temperatures is None or heat_capacities is None):
+            raise ValueError("heat is on in the contact tables: the particles need temperatures and the "
+                             "materials heat capacities")
+        self.heat_capacities = (np.ascontiguousarray(heat_capacities, dtype=float) if self.heat
+                                else np.zeros(0))
+        # Heat the walls and surfaces gave the particles (plane walls, then contributors).
+        self.heat_ledger = HeatLedger(list(walls.names) + [body.name for body in self.contributors])
+        self.heat_step_ratio = 0.0  # largest dt sum(H) / (m c) of an owned particle so far (this rank)
+        self.largest_heat_step_ratio = 0.0  # the same over the ranks, at the last energies() call
+        self.thermal_energy = 0.0  # heat content m c T of the particles [J], at the last energies() call
         self.neighbors = VerletList(history_signs(tables.composition),
                                     np.ascontiguousarray(tables.coefficients[:, :, layout.COHESION_REACH]))
         self.rebalance_threshold = float(rebalance_threshold)
@@ -118,6 +134,10 @@ class ParticleSystem(kinds.StateComponent):
         self._compute_forces()
         kick(state.owned_count, state.velocities, state.angular_velocities, state.forces, state.torques,
              state.inverse_mass, state.inverse_inertia, self.gravity, 0.5 * dt)
+        if self.heat:
+            ratio = update_temperatures(state.owned_count, state.temperatures, state.heat_flows, state.mass,
+                                        state.material_index, self.heat_capacities, dt)
+            self.heat_step_ratio = max(self.heat_step_ratio, ratio)
         # Work done on the particles by moving walls: -F_wall . v_wall dt.
         self.walls.work -= float(np.sum(self.walls.forces * self.walls.velocities)) * dt
 
@@ -155,6 +175,10 @@ class ParticleSystem(kinds.StateComponent):
                             "contact_count": kinds.scalar(int(self.contact_count)),
                             "lost_particles": kinds.scalar(int(self.lost_particles)),
                             "rebalances": kinds.scalar(int(self.rebalances))}
+        if self.heat:
+            result["totals"]["heat_given"] = kinds.global_array(self.heat_ledger.settle(self.comm))
+            result["totals"]["heat_step_ratio"] = kinds.scalar(float(self.comm.allreduce(self.heat_step_ratio,
+                                                                                         op=MPI.MAX)))
         return result
 
     def load_state_dict(self, stored: dict) -> None:
@@ -177,6 +201,12 @@ class ParticleSystem(kinds.StateComponent):
         self.contact_count = int(totals["contact_count"])
         self.lost_particles = int(totals["lost_particles"])
         self.rebalances = int(totals["rebalances"])
+        if self.heat:
+            if "heat_given" not in totals:
+                raise kinds.StateMismatch("holds no heat totals (written by a scene without heat)")
+            self.heat_ledger.total[:] = np.asarray(totals["heat_given"], dtype=float)
+            self.heat_ledger.pending[:] = 0.0
+            self.heat_step_ratio = float(totals["heat_step_ratio"])
 
     def canonicalize(self) -> None:
         self.canonical_rebuild()
@@ -290,22 +320,30 @@ class ParticleSystem(kinds.StateComponent):
         state.torques[:] = 0.0
         walls.forces[:] = 0.0
         owned = state.owned_count
+        if self.heat:
+            temperatures, heat_flows = state.temperatures, state.heat_flows
+            heat_flows[:] = 0.0
+        else:
+            temperatures, heat_flows = NO_TEMPERATURES, NO_HEAT_FLOWS
         elastic, dissipated, contacts = pair_forces(
             neighbors.row_particles, neighbors.offsets, neighbors.partners, neighbors.history, state.ids, owned,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition, self.dt,
-            state.forces, state.torques)
+            state.forces, state.torques, temperatures, heat_flows)
         if walls.count:
             wall_elastic, wall_dissipated, wall_contacts = plane_wall_forces(
                 walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities,
                 walls.material_index, state.wall_history, state.positions, state.velocities,
                 state.angular_velocities, state.radii, state.mass, state.inverse_inertia, state.material_index,
-                tables.coefficients, tables.composition, self.dt, state.forces, state.torques, walls.forces)
+                tables.coefficients, tables.composition, self.dt, state.forces, state.torques, walls.forces,
+                temperatures, heat_flows, walls.temperatures, self.heat_ledger.pending)
             elastic += wall_elastic
             dissipated += wall_dissipated
             contacts += wall_contacts
-        for contributor in self.contributors:
+        for index, contributor in enumerate(self.contributors, start=walls.count):
             extra_elastic, extra_dissipated, extra_contacts = contributor.add_forces(self, 0, owned)
+            if self.heat:
+                self.heat_ledger.pending[index] += contributor.step_heat
             elastic += extra_elastic
             dissipated += extra_dissipated
             contacts += extra_contacts
@@ -335,11 +373,16 @@ class ParticleSystem(kinds.StateComponent):
         kinetic, rotational, potential, fastest_squared = particle_energy_sums(
             state.owned_count, state.mass, state.velocities, state.angular_velocities, state.inverse_inertia,
             state.positions, self.gravity)
-        local = np.array([kinetic, rotational, potential])
+        thermal = (heat_content(state.owned_count, state.temperatures, state.mass, state.material_index,
+                                self.heat_capacities) if self.heat else 0.0)
+        local = np.array([kinetic, rotational, potential, thermal])
+        largest = np.array([fastest_squared, self.heat_step_ratio])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
-            fastest_squared = self.comm.allreduce(fastest_squared, op=MPI.MAX)
-        self.fastest_speed = float(np.sqrt(fastest_squared))
+            self.comm.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
+        self.fastest_speed = float(np.sqrt(largest[0]))
+        self.largest_heat_step_ratio = float(largest[1])
+        self.thermal_energy = float(local[3])
         return {
             "kinetic_energy": float(local[0]),
             "rotational_energy": float(local[1]),

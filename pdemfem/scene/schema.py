@@ -39,9 +39,11 @@ class MaterialConfig(StrictModel):
     thermal_expansion: NonNegativeFloat = Field(
         0.0, description="linear thermal expansion coefficient [1/K] (solids; unused by particles)")
     conductivity: Optional[PositiveFloat] = Field(
-        None, description="thermal conductivity [W/(m K)]; read, not used yet (no heat transfer is modelled)")
+        None, description="thermal conductivity k [W/(m K)]; needed by every particle material (and by walls and "
+                          "solids that exchange heat) when heat is on (docs/heat.md)")
     heat_capacity: Optional[PositiveFloat] = Field(
-        None, description="specific heat [J/(kg K)]; read, not used yet (no heat transfer is modelled)")
+        None, description="specific heat c [J/(kg K)]; needed by every particle material (and by solids) when heat "
+                          "is on; a smaller c heats faster and lowers the thermal step limit (docs/heat.md)")
 
 
 class InteractionConfig(StrictModel):
@@ -144,7 +146,8 @@ class ParticleGroupConfig(StrictModel):
         description="one radius [m], or {min, max} for radii uniformly distributed between the two")
     insert: InsertConfig = Field(description="how the particles are placed at the start")
     initial_temperature: Optional[PositiveFloat] = Field(
-        None, description="starting temperature [K], carried and written (output temperature); no heat transfer is modelled")
+        None, description="starting temperature [K]; giving it switches heat on (docs/heat.md); with heat on "
+                          "and no value: heat.default_temperature")
 
 
 class CylinderAxis(StrictModel):
@@ -162,8 +165,8 @@ class CylinderAxis(StrictModel):
 # The keys each wall kind reads (besides name, kind, material, velocity); see docs/walls.md.
 WALL_KIND_KEYS = {
     "plane": ("point", "normal", "temperature"),
-    "mesh": ("file", "scale", "angular_velocity", "center", "one_sided", "smooth_angle"),
-    "cylinder": ("axis", "radius", "inside", "angular_velocity"),
+    "mesh": ("file", "scale", "angular_velocity", "center", "one_sided", "smooth_angle", "temperature"),
+    "cylinder": ("axis", "radius", "inside", "angular_velocity", "temperature"),
 }
 
 
@@ -177,7 +180,9 @@ class WallConfig(StrictModel):
     point: Vector3 = Field((0.0, 0.0, 0.0), description="a point on the plane [m]")
     normal: Vector3 = Field((0.0, 0.0, 1.0), description="plane normal pointing to the particles' side (any length)")
     velocity: Vector3 = Field((0.0, 0.0, 0.0), description="prescribed wall velocity [m/s]")
-    temperature: Optional[PositiveFloat] = Field(None, description="wall temperature [K]; read, not used yet")
+    temperature: Optional[PositiveFloat] = Field(
+        None, description="fixed wall temperature [K]: touching particles exchange heat with it (switches heat on); "
+                          "absent: the wall is adiabatic (docs/heat.md)")
     # kind: mesh
     file: Optional[str] = Field(None, description="surface mesh (STL, gmsh .msh, or any meshio format), relative to the scene")
     scale: PositiveFloat = Field(1.0, description="factor applied to the file's coordinates (e.g. 0.001 for mm)")
@@ -292,6 +297,17 @@ class CouplingConfig(StrictModel):
                             "whose surface yields to a point load (S_n/(E l) > 0.5, as check reports), else nearest")
 
 
+class HeatConfig(StrictModel):
+    """Heat conduction through the contacts, and in the solids (docs/heat.md)."""
+
+    enabled: Optional[bool] = Field(
+        None, description="true/false switch heat on/off; absent: on when a particle group gives "
+                          "initial_temperature, a wall gives temperature or a solid gives thermal (a scene without "
+                          "heat allocates, computes and writes no temperatures)")
+    default_temperature: PositiveFloat = Field(
+        293.15, description="starting temperature [K] of the particle groups that give none, when heat is on")
+
+
 class Scene(StrictModel):
     time: TimeConfig = Field(description="end time and time step")
     gravity: Vector3 = Field((0.0, 0.0, -9.81), description="gravitational acceleration [m/s^2]")
@@ -309,6 +325,16 @@ class Scene(StrictModel):
     parallel: ParallelConfig = Field(default_factory=ParallelConfig, description="load balance across ranks")
     solids: List[SolidConfig] = Field(default_factory=list, description="deformable FE solids (PETSc)")
     coupling: CouplingConfig = Field(default_factory=CouplingConfig, description="the DEM-FEM coupled step")
+    heat: HeatConfig = Field(default_factory=HeatConfig, description="heat conduction (docs/heat.md)")
+
+    @property
+    def heat_enabled(self) -> bool:
+        """Whether the scene conducts heat: heat.enabled, else whether a thermal key is given."""
+        if self.heat.enabled is not None:
+            return self.heat.enabled
+        return (any(group.initial_temperature is not None for group in self.particles)
+                or any(wall.temperature is not None for wall in self.walls)
+                or any(getattr(solid, "thermal", None) is not None for solid in self.solids))
 
     @model_validator(mode="after")
     def _references(self):
@@ -336,12 +362,29 @@ class Scene(StrictModel):
         if clashes:
             raise ValueError(f"walls/solids: names {clashes} are used twice; wall and solid names share one "
                              f"namespace (wall_force, history columns): rename one")
+        if self.heat_enabled:
+            self._heat_materials()
         for kind, items in (("particles", self.particles), ("walls", self.walls)):
             names = [item.name for item in items]
             duplicates = sorted({name for name in names if names.count(name) > 1})
             if duplicates:
                 raise ValueError(f"{kind}: duplicate names {duplicates}; give each entry its own name")
         return self
+
+    def _heat_materials(self) -> None:
+        """With heat on, every body that exchanges heat needs the material keys its law reads."""
+        needs = {}  # material -> (keys, who)
+        for index, group in enumerate(self.particles):
+            needs.setdefault(group.material, [set(), f"particles[{index}]"])[0].update(("conductivity", "heat_capacity"))
+        for index, wall in enumerate(self.walls):
+            if wall.temperature is not None:
+                needs.setdefault(wall.material, [set(), f"walls[{index}]"])[0].add("conductivity")
+        for name, (keys, who) in needs.items():
+            missing = sorted(key for key in keys if getattr(self.materials[name], key) is None)
+            if missing:
+                raise ValueError(f"materials.{name}: heat is on and {who} uses this material, which lacks "
+                                 f"{' and '.join(missing)}; give {', '.join(f'{key}: ...' for key in missing)} "
+                                 f"(units in docs/heat.md), or switch heat off with heat: {{enabled: false}}")
 
     def interaction(self, material_a: str, material_b: str) -> InteractionConfig:
         """The interaction for a pair of materials: 'a-b' or 'b-a', else 'default'."""

@@ -15,6 +15,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem import state_dict as kinds
+from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES
 
 
 def rotation_matrix(rotation_vector) -> np.ndarray:
@@ -37,6 +38,10 @@ class ContributorWall(kinds.StateComponent):
         self.totals = np.zeros(6)
         self.work = 0.0
         self._step_work = 0.0
+        # With heat on: the wall's fixed temperature [K] (NaN: adiabatic), and the heat [J] it gave this
+        # rank's particles in the last add_forces (the particle system books it).
+        self.temperature = math.nan
+        self.step_heat = 0.0
 
     @property
     def force(self) -> np.ndarray:
@@ -53,6 +58,17 @@ class ContributorWall(kinds.StateComponent):
         comm.Allreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)
         self.totals[:] = buffer[:6]
         self.work += buffer[6] - self._step_work
+
+    def set_temperature(self, temperature: float) -> None:
+        """Hold the wall at `temperature` [K] (with heat on, touching particles exchange heat with it)."""
+        self.temperature = float(temperature)
+
+    @staticmethod
+    def _heat_arrays(state):
+        """(temperatures, heat_flows) for a kernel: the state's with heat on, empty arrays otherwise."""
+        if state.temperatures is None:
+            return NO_TEMPERATURES, NO_HEAT_FLOWS
+        return state.temperatures, state.heat_flows
 
     @staticmethod
     def _field(state, name: str, tail_shape, dtype, fill):

@@ -22,7 +22,8 @@ import numpy as np
 from numba import njit
 
 from pdemfem import state_dict as kinds
-from pdemfem.contact.layout import COHESIVE
+from pdemfem.contact.conduction import contact_conductance
+from pdemfem.contact.layout import COHESIVE, HEAT
 from pdemfem.contact.response import cohesive_contact_holds, released_energy, rigid_wall_contact
 from pdemfem.walls.base import ContributorWall, rotation_matrix
 
@@ -30,17 +31,21 @@ from pdemfem.walls.base import ContributorWall, rotation_matrix
 @njit(cache=True)
 def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velocity, angular_velocity,
                     wall_row, history, positions, velocities, angular_velocities, radii, mass, inverse_inertia,
-                    material_index, coefficients, composition, dt, forces, torques, totals):
+                    material_index, coefficients, composition, dt, forces, torques, totals, temperatures, heat_flows,
+                    wall_temperature):
     """Add the cylinder's contact forces on particles [first, last); history (count, 1, width + 1) per
-    particle: the contact history, then the last step's overlap.
+    particle: the contact history, then the last step's overlap.  With heat on and a wall temperature
+    (not NaN), the contacts conduct (heat_flows: pdemfem.particles.heat).
 
-    Returns (elastic, dissipated, contacts, work done on the particles)."""
+    Returns (elastic, dissipated, contacts, work done on the particles, heat [J] given to them)."""
     overlap_column = history.shape[2] - 1
     # One row per particle (a view per particle in the loop would cost reference counting every step).
     rows = history.reshape(history.shape[0], history.shape[2])
     elastic_total = 0.0
     dissipated_total = 0.0
     work = 0.0
+    heat = 0.0
+    conducting = (composition & HEAT) != 0 and wall_temperature == wall_temperature
     contacts = 0
     ex = direction[0]
     ey = direction[1]
@@ -111,7 +116,14 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         totals[3] += -(qy * fz - qz * fy) - mx
         totals[4] += -(qz * fx - qx * fz) - my
         totals[5] += -(qx * fy - qy * fx) - mz
-    return elastic_total, dissipated_total, contacts, work
+        if conducting:
+            conductance = contact_conductance(composition, coefficients, material_index[i], wall_row,
+                                              radius - distance, mass[i], radius)
+            flow = conductance * (wall_temperature - temperatures[i])
+            heat_flows[i, 0] += flow
+            heat_flows[i, 1] += conductance
+            heat += flow * dt
+    return elastic_total, dissipated_total, contacts, work, heat
 
 
 class CylinderWall(ContributorWall):
@@ -155,11 +167,13 @@ class CylinderWall(ContributorWall):
         # The contact history, then the last step's overlap (what an opening contact held).
         history = self._field(state, f"wall:{self.name}:history", (1, tables.history_width + 1), np.float64, 0.0)
         self.totals[:] = 0.0
-        elastic, dissipated, contacts, work = cylinder_forces(
+        temperatures, heat_flows = self._heat_arrays(state)
+        elastic, dissipated, contacts, work, self.step_heat = cylinder_forces(
             first, last, self.point, self.direction, self.radius, self.inside, self.velocity, self.angular_velocity,
             self.material_index, history, state.positions, state.velocities, state.angular_velocities,
             state.radii, state.mass, state.inverse_inertia, state.material_index, tables.coefficients,
-            tables.composition, system.dt, state.forces, state.torques, self.totals)
+            tables.composition, system.dt, state.forces, state.torques, self.totals, temperatures, heat_flows,
+            self.temperature)
         self.contact_count = int(contacts)
         self._step_work = float(work)
         self.work += self._step_work

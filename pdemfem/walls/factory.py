@@ -31,4 +31,8 @@ def build_contributor_walls(wall_configs, material_names, resolve_file, skin=Non
         elif wall.kind == "cylinder":
             walls.append(CylinderWall(wall.name, wall.axis.point, wall.axis.direction, wall.radius, wall.inside,
                                       material, velocity=wall.velocity, angular_velocity=wall.angular_velocity))
+        else:
+            continue
+        if wall.temperature is not None:
+            walls[-1].set_temperature(wall.temperature)
     return walls

@@ -176,6 +176,10 @@ class TriangleSurface(ContributorWall):
         self.slots = int(slots)
         self.spread_to_vertices = bool(spread_to_vertices)
         self.vertex_forces = np.zeros_like(self.vertices)
+        # With heat on: the surface temperature [K] at each vertex (empty: adiabatic), and the heat [J] the
+        # contacts sent into each vertex since it was last cleared (a solid's coupling takes it).
+        self.vertex_temperatures = np.zeros(0)
+        self.vertex_heat = np.zeros(len(self.vertices))
         self.bvh = BVH(self.vertices, self.triangles)
         self.list_builds = 0
         self.contact_count = 0
@@ -200,6 +204,12 @@ class TriangleSurface(ContributorWall):
 
     def move(self, dt: float) -> None:
         """A surface driven from outside (set_vertices) does not move by itself."""
+
+    def set_temperature(self, temperature) -> None:
+        """The surface temperature [K]: one value (a wall held at it) or one per vertex (a solid's surface)."""
+        values = np.broadcast_to(np.asarray(temperature, dtype=float), (len(self.vertices),))
+        self.temperature = float(values[0]) if np.ndim(temperature) == 0 else math.nan
+        self.vertex_temperatures = np.ascontiguousarray(values, dtype=float).copy()
 
     # ------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
@@ -275,7 +285,8 @@ class TriangleSurface(ContributorWall):
         if self.spread_to_vertices or self.blended:
             self.vertex_forces[:] = 0.0
         records = self._records
-        elastic, dissipated, contacts, work = mesh_contact_forces(
+        temperatures, heat_flows = self._heat_arrays(state)
+        elastic, dissipated, contacts, work, self.step_heat = mesh_contact_forces(
             first, last, self.candidate_offsets, self.candidate_triangles,
             self.vertices, self.vertex_velocities, self.triangles, self.patch,
             self.vertex_patch_offsets, self.vertex_patches, self.one_sided, self.material_index,
@@ -284,7 +295,8 @@ class TriangleSurface(ContributorWall):
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition,
             tables.cohesion_reach, system.dt, state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,
             records.particle, records.triangle, records.weights, records.point, records.force, records.damping,
-            self._scratch_int, self._scratch_float, self._spare_history)
+            self._scratch_int, self._scratch_float, self._spare_history,
+            temperatures, heat_flows, self.vertex_temperatures, self.vertex_heat)
         self.contact_count = int(contacts)
         self._step_work = float(work)
         self.work += self._step_work

@@ -21,6 +21,9 @@ class PlaneWalls(kinds.StateComponent):
         self.material_index = np.array([material_names.index(wall.material) for wall in wall_configs],
                                        dtype=np.int32)
         self.forces = np.zeros((count, 3))
+        # Fixed temperature [K] of each wall with heat on; NaN: adiabatic.
+        self.temperatures = np.array([np.nan if wall.temperature is None else wall.temperature
+                                      for wall in wall_configs], dtype=float).reshape(count)
         # (particle, wall) pairs that may touch before the next list build, particle-major.
         self.candidate_particles = np.zeros(0, dtype=np.int64)
         self.candidate_walls = np.zeros(0, dtype=np.int64)

@@ -51,6 +51,8 @@ import math
 import numpy as np
 from numba import njit
 
+from pdemfem.contact.conduction import contact_conductance
+from pdemfem.contact.layout import HEAT
 from pdemfem.contact.registry import history_layout
 from pdemfem.contact.response import (history_in_use, pull_off_overlap, released_energy, rigid_wall_contact)
 
@@ -307,8 +309,14 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         coefficients, composition, cohesion_reach, dt,
                         forces, torques, totals, spread_to_vertices, vertex_forces,
                         record_particle, record_triangle, record_weights, record_point, record_force,
-                        record_damping, scratch_int, scratch_float, spare_history):
+                        record_damping, scratch_int, scratch_float, spare_history,
+                        temperatures, heat_flows, vertex_temperatures, vertex_heat):
     """Add the mesh-wall contact forces of particles [first, last).
+
+    With heat on (composition) and vertex temperatures given (an empty array: adiabatic), a contact
+    conducts to the surface temperature at its point, interpolated by the barycentric weights, and its
+    heat goes to the triangle's vertices by the same weights (vertex_heat += weight x flow x dt [J]): the
+    particle's heat and the vertices' balance exactly.
 
     totals[0:3] += force on the wall, totals[3:6] += its moment about the origin
     (sum of q x F_wall minus the rolling couples).  One record per contact
@@ -318,9 +326,11 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
     surface velocity there (3), see pdemfem.coupling.dampers).  scratch_int (M, 5) / scratch_float (M, 8) hold the per-patch
     proposals of one particle (M >= the longest candidate list).  A cohesive contact (composition) holds
     beyond touching down to its pull-off overlap: triangles within radius + cohesion_reach propose.
-    Returns (elastic, dissipated, contacts, work done on the particles by the wall).
+    Returns (elastic, dissipated, contacts, work done on the particles by the wall, heat [J] it gave them).
     """
     touching_column = history_layout(composition)[2]
+    conducting = (composition & HEAT) != 0 and vertex_temperatures.shape[0] > 0
+    heat = 0.0
     overlap_column = slot_history.shape[2] - 1
     elastic_total = 0.0
     dissipated_total = 0.0
@@ -572,6 +582,18 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 fy -= normal_elastic_force * ny
                 fz -= normal_elastic_force * nz
             history[slot, overlap_column] = radius - distance  # this step's overlap
+            if conducting:
+                conductance = contact_conductance(composition, coefficients, material_index[i], wall_material,
+                                                  radius - distance, mass[i], radius)
+                surface_temperature = (wa * vertex_temperatures[a] + wb * vertex_temperatures[b]
+                                       + wc * vertex_temperatures[c])
+                flow = conductance * (surface_temperature - temperatures[i])
+                heat_flows[i, 0] += flow
+                heat_flows[i, 1] += conductance
+                heat += flow * dt
+                vertex_heat[a] -= wa * flow * dt
+                vertex_heat[b] -= wb * flow * dt
+                vertex_heat[c] -= wc * flow * dt
             elastic_total += elastic
             dissipated_total += dissipated
             work += (fx * sx + fy * sy + fz * sz) * dt
@@ -620,7 +642,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 vertex_forces[c, 1] -= wc * fy
                 vertex_forces[c, 2] -= wc * fz
             contacts += 1
-    return elastic_total, dissipated_total, contacts, work
+    return elastic_total, dissipated_total, contacts, work, heat
 
 
 @njit(cache=True)
