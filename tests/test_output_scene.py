@@ -60,7 +60,7 @@ def test_output_serial_p1(tmp_path):
     import restart_scenes
     from pdemfem.simulation import Simulation
 
-    scene = restart_scenes.pile_scene(tmp_path, STEPS, STEPS // 2, element="P1")
+    scene = restart_scenes.heated(restart_scenes.pile_scene(tmp_path, STEPS, STEPS // 2, element="P1"))
     simulation = Simulation.from_dict(scene, comm=MPI.COMM_WORLD, base_dir=tmp_path)
     simulation.run(progress=False)
     check_files(tmp_path, restart_output.dump(simulation))

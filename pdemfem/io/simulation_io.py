@@ -103,14 +103,20 @@ class SimulationIO:
         comm.Barrier()
         self._history = HistoryWriter(history_path, columns, comm.rank == 0, append=append)
         output = sim.scene.output
-        if output.particles:
-            self._particles_out = ParticleOutput(sim.output_dir, comm, list(output.particles),
+        if self.particle_fields():
+            self._particles_out = ParticleOutput(sim.output_dir, comm, self.particle_fields(),
                                                  resume_step=self.resume_step)
         if output.solids:
             for name, solid in sim.solids.items():
                 layout = self._solid_layouts[name] = _SolidOutputLayout(solid, comm)
                 self._solid_outputs[name] = SolidOutput(sim.output_dir, name, comm, layout.points, layout.cells,
                                                         layout.node_offset, resume_step=self.resume_step)
+
+    def particle_fields(self) -> list:
+        """output.particles, without temperature when heat is off (the default list names it; a scene that
+        asks for it explicitly without heat is refused at validation)."""
+        heat = self.sim.particle_system.heat
+        return [name for name in self.sim.scene.output.particles if heat or name != "temperature"]
 
     def _prepare_output(self) -> None:
         """Collective, before the first write: refuse to overwrite or mix an earlier run's files
@@ -173,7 +179,7 @@ class SimulationIO:
     def particle_output_arrays(self) -> dict:
         state = self.sim.particle_system.state
         owned = state.owned_count
-        return {name: getattr(state, PARTICLE_SOURCES[name])[:owned] for name in self.sim.scene.output.particles}
+        return {name: getattr(state, PARTICLE_SOURCES[name])[:owned] for name in self.particle_fields()}
 
     def solid_output_arrays(self, name: str) -> tuple[dict, dict]:
         """(point data, cell data) of a solid as written: this rank's blocks of the output

@@ -364,6 +364,9 @@ class Scene(StrictModel):
                              f"namespace (wall_force, history columns): rename one")
         if self.heat_enabled:
             self._heat_materials()
+        elif "temperature" in self.output.particles and "particles" in self.output.model_fields_set:
+            raise ValueError("output.particles: temperature is written only with heat on; give a particle group "
+                             "initial_temperature (or heat: {enabled: true}), or remove temperature from the list")
         for kind, items in (("particles", self.particles), ("walls", self.walls)):
             names = [item.name for item in items]
             duplicates = sorted({name for name in names if names.count(name) > 1})

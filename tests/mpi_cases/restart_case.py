@@ -1,6 +1,6 @@
 """MPI case: uninterrupted run or restart of restart_scenes.pile_scene, final state to an .npz.
 
-    restart_case.py OUT STEPS CHECKPOINT_STEPS RESULT.npz [--restart FILE] [--element P2] [--cohesive]
+    restart_case.py OUT STEPS CHECKPOINT_STEPS RESULT.npz [--restart FILE] [--element P2] [--cohesive] [--heated]
 
 The uninterrupted run writes checkpoints every CHECKPOINT_STEPS; with --restart the run
 continues from FILE to the same end.  Rank 0 writes the state (sorted by id) to RESULT.npz.
@@ -23,6 +23,8 @@ element = sys.argv[sys.argv.index("--element") + 1] if "--element" in sys.argv e
 scene = restart_scenes.pile_scene(out, steps, checkpoint_steps, checkpoint_steps, element=element)
 if "--cohesive" in sys.argv:
     scene = restart_scenes.cohesive(scene)
+if "--heated" in sys.argv:
+    scene = restart_scenes.heated(scene)
 with restart_scenes.cross_rank_static_solve():  # compared with other rank counts to round-off
     simulation = Simulation.from_dict(scene, comm=comm, base_dir=out, restart=restart)
 simulation.run(progress=False)

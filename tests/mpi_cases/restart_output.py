@@ -46,7 +46,7 @@ def dump(simulation) -> dict | None:
 if __name__ == "__main__":
     comm = MPI.COMM_WORLD
     out, steps, element, result = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
-    scene = restart_scenes.pile_scene(out, steps, steps // 2, element=element)
+    scene = restart_scenes.heated(restart_scenes.pile_scene(out, steps, steps // 2, element=element))
     simulation = Simulation.from_dict(scene, comm=comm, base_dir=out)
     simulation.run(progress=False)
     data = dump(simulation)
