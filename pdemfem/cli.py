@@ -443,6 +443,11 @@ def _report(path, scene, base_dir, placed) -> tuple:
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({derived.BYTES_PER_PARTICLE} B/particle, "
                      f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
         lines.append(f"work: {total * steps:.3g} particle-steps")
+        thermal = derived.thermal_step_limit(scene)
+        if scene.heat_enabled:
+            lines.append("heat: on (contact conduction" + (", solids conduct" if scene.solids else "") + ")" + (
+                f"; thermal step limit ~{thermal[0]:.3g} s ({thermal[1]}), dt is {dt / thermal[0]:.2g} of it"
+                if thermal is not None else ""))
     found = derived.warnings(scene, solid_critical_step=dt if scene.solids and not scene.particles else None)
     if scene.solids:
         from pdemfem.coupling.check import coupling_report

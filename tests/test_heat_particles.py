@@ -224,3 +224,32 @@ def test_heat_switch_needs_the_material_keys():
     assert "materials.grain" in str(error.value) and "heat_capacity" in str(error.value)
     scene["heat"] = {"enabled": False}
     assert Simulation.from_dict(scene).particle_system.state.temperatures is None
+
+
+def test_thermal_step_past_the_limit_is_warned_by_check_and_stops_the_run(tmp_path):
+    """A heat capacity so small that dt H / (m c) ~ 3 on a hot floor: `check` warns from its estimate, and
+    the run stops (SolverError naming the fix) instead of writing oscillating temperatures."""
+    from pdemfem.errors import SolverError
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import load_scene
+
+    radius = 1.0e-3
+    scene, _ = _stack_scene(radius, 0.7e-3, floor_temperature=500.0)
+    scene["particles"] = scene["particles"][:1]
+    scene["output"] = {"dir": str(tmp_path / "out"), "particles": []}
+    scene["time"]["end"] = 0.01
+    probe = Simulation.from_dict(scene)
+    overlap = _hertz_overlap(_mass(radius) * G, _modulus(MATERIAL, FLOOR), radius)
+    k_pair = 2.0 * MATERIAL["conductivity"] * FLOOR["conductivity"] / (MATERIAL["conductivity"] + FLOOR["conductivity"])
+    resting_conductance = 2.0 * k_pair * math.sqrt(radius * overlap)
+    scene["materials"]["grain"]["heat_capacity"] = probe.dt * resting_conductance / (3.0 * _mass(radius))
+    loaded, _ = load_scene(scene)
+    assert any("thermal step limit" in warning for warning in derived.warnings(loaded))
+    sim = Simulation.from_dict(scene)
+    with pytest.raises(SolverError) as error:
+        sim.run(progress=False)
+    assert "temperature update is unstable" in str(error.value) and "heat_capacity" in str(error.value)
+    # With a capacity 10x above the resting limit the same run completes (the guard is not a false alarm).
+    scene["materials"]["grain"]["heat_capacity"] *= 10.0
+    scene["output"]["dir"] = str(tmp_path / "out2")
+    Simulation.from_dict(scene).run(progress=False)

@@ -83,10 +83,13 @@ class CouplingDriver(kinds.StateComponent):
     def _advance_solids(self, interval: float) -> None:
         for surface in self.surfaces:
             surface.remember_positions()
+            surface.send_heat_to_solid(interval)
         for name, solid in self.solids.items():
             self.fem_substeps[name] = solid.advance(interval)
         for surface in self.surfaces:
             surface.refresh_vertices(interval)
+            if surface.conducting:
+                surface.refresh_temperatures()
             # The records move between ranks only when particles can have moved since they were taken.
             surface.balance_dampers(self.dt, exchange=self.fem_every > 1)
         self.advances += 1

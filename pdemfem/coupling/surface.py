@@ -7,6 +7,12 @@ to the owning FE nodes through Solid.add_nodal_forces (PETSc ADD_VALUES), so
 every rank adds only the contacts of the particles it owns and each contact is
 summed exactly once.
 
+With heat on and a conducting solid, the surface vertices carry the solid's nodal temperatures
+(refreshed after every FE advance) and the contacts' heat [J], spread onto the vertices by the
+contact point's weights (pdemfem.walls.triangle_contact), is summed over the steps of the window and
+given to the solid as a constant nodal heat flow over the next advance (Solid.add_nodal_heat): the
+heat the particles lose is what the solid's nodes receive, to round-off.
+
 The contacts' dashpots are not part of that held load: the solid applies them to its
 surface nodes at every FE sub-step and the particles get the balancing impulse after the
 advance (pdemfem.coupling.dampers explains why and how momentum stays exact).
@@ -48,6 +54,10 @@ class CoupledSurface(kinds.StateComponent):
         self._advanced_records = np.zeros((0, RECORD_COLUMNS))
         self.particle_system = None  # set by the simulation: the dashpot balance acts on its particles
         self.dissipation_correction_local = 0.0  # [J], this rank's contacts (dampers.balance_particles)
+        # Heat: only when the solid conducts (Solid.heat); the particles' side decides whether contacts conduct.
+        self.conducting = getattr(solid, "heat", None) is not None
+        if self.conducting:
+            self.refresh_temperatures()
 
     def collect_contact_forces(self, keep_dampers: bool = True) -> None:
         """Add this step's contact counter-forces (this rank's contacts) to the accumulator and keep the
@@ -90,6 +100,22 @@ class CoupledSurface(kinds.StateComponent):
         loaded = np.flatnonzero(np.any(forces != 0.0, axis=1))
         self.solid.add_nodal_forces(self.node_indices[loaded], forces[loaded])
         self.accumulated_forces[:] = 0.0
+
+    # ------------------------------------------------------------ heat
+    def refresh_temperatures(self) -> None:
+        """Collective: the solid's nodal temperatures onto the surface vertices."""
+        surface = self.solid.contact_surface()
+        self.triangle_surface.set_temperature(surface.gather_scalar(self.solid.temperature_vec))
+
+    def send_heat_to_solid(self, interval: float) -> None:
+        """The heat [J] this rank's contacts sent into the vertices since the last advance, as a nodal heat
+        flow [W] held over the next advance of length `interval` (so the solid receives exactly it)."""
+        if not self.conducting:
+            return
+        heat = self.triangle_surface.vertex_heat
+        loaded = np.flatnonzero(heat != 0.0)
+        self.solid.add_nodal_heat(self.node_indices[loaded], heat[loaded] / interval)
+        heat[:] = 0.0
 
     def balance_dampers(self, dt: float, exchange: bool) -> None:
         """After an advance and refresh_vertices: give the particles the dashpot impulse the solid took
@@ -156,14 +182,20 @@ class CoupledSurface(kinds.StateComponent):
         """Collective: the counter-forces accumulated since the last advance summed over the ranks,
         and every rank's dashpot records of the window (on every rank)."""
         total = self.accumulated_forces.copy()
+        heat = self.triangle_surface.vertex_heat.copy()
         if comm.size > 1:
             comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
-        return total, self.checkpoint_records(comm)
+            if self.conducting:
+                comm.Allreduce(MPI.IN_PLACE, heat, op=MPI.SUM)
+        return total, self.checkpoint_records(comm), heat
 
     def state_dict(self) -> dict:
         """Collective: the sub-cycling window so far (the surface's vertices are the wall's state)."""
-        total, records = self._window_sums(self.solid.comm)
-        return {"accumulated_forces": kinds.global_array(total), "damper_records": kinds.global_array(records)}
+        total, records, heat = self._window_sums(self.solid.comm)
+        state = {"accumulated_forces": kinds.global_array(total), "damper_records": kinds.global_array(records)}
+        if self.conducting:
+            state["accumulated_heat"] = kinds.global_array(heat)
+        return state
 
     def load_state_dict(self, state: dict) -> None:
         """After the solid's state: its surface positions mirrored; the window's sums kept on rank 0
@@ -173,13 +205,21 @@ class CoupledSurface(kinds.StateComponent):
         self.accumulated_forces[:] = np.asarray(state["accumulated_forces"]) if comm.rank == 0 else 0.0
         self.restore_records(state["damper_records"], comm)
         self.dissipation_correction_local = 0.0
+        if self.conducting:
+            if "accumulated_heat" not in state:
+                raise kinds.StateMismatch(f"solid '{self.name}': the checkpoint holds no surface heat (written "
+                                          f"without heat)")
+            self.triangle_surface.vertex_heat[:] = np.asarray(state["accumulated_heat"]) if comm.rank == 0 else 0.0
+            self.refresh_temperatures()
 
     def canonicalize(self) -> None:
         """Collective: the window's sums moved to rank 0, as a restart has them."""
         comm = self.solid.comm
-        total, records = self._window_sums(comm)
+        total, records, heat = self._window_sums(comm)
         self.accumulated_forces[:] = total if comm.rank == 0 else 0.0
         self.restore_records(records, comm)
+        if self.conducting:
+            self.triangle_surface.vertex_heat[:] = heat if comm.rank == 0 else 0.0
 
     def remember_positions(self) -> None:
         """Keep the mirrored positions before an advance (for the mean surface velocity over it)."""

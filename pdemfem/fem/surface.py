@@ -36,6 +36,16 @@ class ContactSurface:
                                       mode=PETSc.ScatterMode.FORWARD)
         return self._gathered.getArray(readonly=True).reshape(-1, 3).copy()
 
+    def gather_scalar(self, nodal: PETSc.Vec) -> np.ndarray:
+        """Collective: a nodal scalar field (e.g. the temperature, block size 1) at node_indices, on every rank."""
+        if getattr(self, "_scalar_scatter", None) is None:
+            self._scalar_gathered = PETSc.Vec().createSeq(len(self.node_indices), comm=PETSc.COMM_SELF)
+            source = PETSc.IS().createGeneral(self.node_indices.astype(PETSc.IntType), comm=PETSc.COMM_SELF)
+            self._scalar_scatter = PETSc.Scatter().create(nodal, source, self._scalar_gathered, None)
+        self._scalar_scatter.scatter(nodal, self._scalar_gathered, addv=PETSc.InsertMode.INSERT_VALUES,
+                                     mode=PETSc.ScatterMode.FORWARD)
+        return self._scalar_gathered.getArray(readonly=True).copy()
+
     def gather(self, displacement: PETSc.Vec, velocity: PETSc.Vec) -> tuple[np.ndarray, np.ndarray]:
         """Collective: (positions, velocities) of node_indices, (n, 3) each, on every rank."""
         return self.reference_positions + self._gather(displacement), self._gather(velocity)

@@ -99,6 +99,13 @@ class ParticleSystem(kinds.StateComponent):
         self._check_periodic_lengths()
         self._rebuild(force_rebalance=True)
         self._compute_forces()
+        if self.heat:
+            # The first step's forces come from this evaluation, its heat does not: a step moves the heat
+            # of its own evaluation (step), so nothing is booked for this one.
+            self.heat_ledger.pending[:] = 0.0
+            for contributor in self.contributors:
+                if getattr(contributor, "vertex_heat", None) is not None:
+                    contributor.vertex_heat[:] = 0.0
 
     def _check_periodic_lengths(self):
         from pdemfem.errors import SceneError

@@ -678,7 +678,57 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
                          f"through the thin surface whatever the step (the run stops when it happens): use stiffer "
                          f"materials (youngs_modulus) or lower the impact speed")
     found.extend(start_inside_walls(scene))
+    thermal = thermal_step_limit(scene)
+    if thermal is not None and dt > thermal[0]:
+        found.append(f"dt = {dt:.3g} s is above the estimated thermal step limit {thermal[0]:.3g} s of group "
+                     f"'{thermal[1]}' (m c / sum of its contacts' conductances): temperatures may overshoot or "
+                     f"blow up and the run stops when a particle passes it; raise heat_capacity, lower "
+                     f"conductivity or dt (docs/heat.md)")
     return found
+
+
+# Contacts a particle can have at once, for the thermal step estimate: 12 equal neighbours (close packing)
+# and the walls of a corner.  A smaller sphere among larger ones has fewer; a large one among small ones
+# more (the run-time guard measures the real sum every step).
+THERMAL_CONTACTS = 12 + 3
+
+
+def thermal_step_limit(scene: Scene) -> Optional[Tuple[float, str]]:
+    """(dt, group) below which the explicit temperature update stays stable and overshoot-free,
+    dt sum(H) / (m c) <= 1 (pdemfem.particles.heat), estimated for the smallest particle of each group
+    with THERMAL_CONTACTS contacts, each as conductive as the group's best contact (H = 2 k* a, a at the
+    Hertz peak overlap of an impact at the expected speed, at least that of a drop by one diameter of the
+    smallest particle: the agitation of a pile settling); None with heat off or no particles."""
+    if not scene.heat_enabled or not scene.particles:
+        return None
+    smallest = min(group_radius_range(group)[0] for group in scene.particles)
+    speed = max(expected_impact_speed(scene), math.sqrt(4.0 * _norm(scene.gravity) * smallest))
+    if not (0.0 < speed < math.inf):
+        return None
+    best = {}
+    for kind, name_a, name_b, m_eff, r_eff, e_eff in _pairs(scene):
+        k_a, k_b = scene.materials[name_a].conductivity, scene.materials[name_b].conductivity
+        if kind == "particle_wall" and not _wall_conducts(scene, name_b):
+            continue
+        if not k_a or not k_b:
+            continue
+        radius = math.sqrt(r_eff * _peak_overlap(m_eff, r_eff, e_eff, speed))
+        conductance = 4.0 * k_a * k_b / (k_a + k_b) * radius
+        best[name_a] = max(best.get(name_a, 0.0), conductance)
+    limits = []
+    for group in scene.particles:
+        material = scene.materials[group.material]
+        conductance = best.get(group.material, 0.0)
+        if conductance > 0.0 and material.heat_capacity:
+            capacity = _mass(material, group_radius_range(group)[0]) * material.heat_capacity
+            limits.append((capacity / (THERMAL_CONTACTS * conductance), group.name))
+    return min(limits) if limits else None
+
+
+def _wall_conducts(scene: Scene, material: str) -> bool:
+    """Whether some wall or solid of this material exchanges heat (a wall needs a temperature)."""
+    return (any(wall.material == material and wall.temperature is not None for wall in scene.walls)
+            or any(solid.material == material for solid in scene.solids))
 
 
 def start_inside_walls(scene: Scene) -> List[str]:
