@@ -53,3 +53,25 @@ def test_dem_rank_count_agreement(tmp_path):
         assert int(result["contacts"]) == int(serial["contacts"])
         force_difference = float(np.abs(result["wall_forces"] - serial["wall_forces"]).max())
         assert force_difference <= force_tolerance, (ranks, force_difference, force_tolerance)
+
+
+@pytest.mark.mpi
+def test_heat_rank_count_agreement(tmp_path):
+    """The same scene with heat on (a 400 K floor, grains at 300 K, conduction at every contact):
+    temperatures on 2 and 3 ranks agree with 1 rank within the round-off growth measured the same way
+    (a one-ulp nudge of the positions, union bound over the steps), and the floor's heat ledger too."""
+    serial = _run(tmp_path, 1, "heat")
+    perturbed = _run(tmp_path, 1, "ulp", "heat")
+    temperatures = serial["temperatures"]
+    assert temperatures.max() > 300.0 + 1.0, "heat must have moved for the comparison to mean something"
+    growth = float(np.abs(perturbed["temperatures"] - temperatures).max())
+    tolerance = growth * STEPS + 100.0 * np.spacing(400.0)
+    assert tolerance < 1e-4, tolerance  # 1e-6 of the 100 K that can move: a tight comparison
+    heat_growth = float(np.abs(perturbed["heat_given"] - serial["heat_given"]).max())
+    heat_tolerance = heat_growth * STEPS + 1e-13 * float(np.abs(serial["heat_given"]).max())
+    for ranks in (2, 3):
+        result = _run(tmp_path, ranks, "heat")
+        difference = float(np.abs(result["temperatures"] - temperatures).max())
+        assert difference <= tolerance, (ranks, difference, tolerance)
+        heat_difference = float(np.abs(result["heat_given"] - serial["heat_given"]).max())
+        assert heat_difference <= heat_tolerance, (ranks, heat_difference, heat_tolerance)
