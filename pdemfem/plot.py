@@ -1,12 +1,15 @@
 """Plots of a run's history.csv (matplotlib, Agg backend: no display needed).
 
     plot_history("out/demo")  ->  out/demo/plots/energies.png, wall_forces.png, particles.png,
-                                  reactions.png, deflections.png (those with data)
+                                  reactions.png, deflections.png, temperatures.png, heat.png
+                                  (those with data)
 
 Columns used (missing ones are skipped): ``time``; every ``*_energy`` column and ``wall_work``;
 ``mean_force_<wall>_x/_y/_z`` per wall and contact solid (the mean over each output interval;
 ``force_<wall>_*``, the value at the output time, when a history has no means);
-``reaction_<solid>_<group>_x/_y/_z``; ``max_displacement_<solid>``; ``particles`` and ``contacts``.
+``reaction_<solid>_<group>_x/_y/_z``; ``max_displacement_<solid>``; ``particles`` and ``contacts``;
+with heat, ``temperature_<body>_min/_mean/_max`` (particles and each conducting solid), ``heat_<name>`` and
+``thermal_energy`` (drawn apart from the mechanical energies, which they would dwarf).
 A quantity that stays constant over the whole run gets no curve (its value is named in the
 title instead), and a figure all of whose quantities are constant is not drawn.
 """
@@ -28,6 +31,10 @@ _WALL_FORCE = re.compile(r"^force_(.+)_([xyz])$")
 _MEAN_FORCE = re.compile(r"^mean_force_(.+)_([xyz])$")
 _REACTION = re.compile(r"^reaction_(.+)_([xyz])$")
 _DEFLECTION = re.compile(r"^max_displacement_(.+)$")
+_TEMPERATURE = re.compile(r"^temperature_(.+)_(min|mean|max)$")
+_HEAT = re.compile(r"^heat_(.+)$")
+# Heat content (m c T) is not a mechanical energy: it has its own figure.
+_THERMAL = ("thermal_energy", "particle_thermal_energy")
 
 
 def read_history(path) -> Dict[str, np.ndarray]:
@@ -121,7 +128,8 @@ def plot_history(outdir) -> List[Path]:
     def titled(axes, title, note):
         axes.set_title(title + (f"\n({note})" if note else ""), fontsize="medium")
 
-    energies = [name for name in data if name.endswith("_energy") or name in ("wall_work", "solid_load_potential")]
+    energies = [name for name in data if (name.endswith("_energy") or name in ("wall_work", "solid_load_potential"))
+                and name not in _THERMAL]
     varying = [name for name in energies if not is_constant(data[name])]
     if varying:
         figure, axes = pyplot.subplots(figsize=(7, 4.5))
@@ -160,6 +168,8 @@ def plot_history(outdir) -> List[Path]:
         axes.grid(alpha=0.3)
         save(figure, "deflections.png")
 
+    _temperature_figures(pyplot, save, titled, time, data)
+
     counts = [name for name in ("particles", "contacts") if name in data]
     varying = [name for name in counts if not is_constant(data[name])]
     if varying:
@@ -174,6 +184,45 @@ def plot_history(outdir) -> List[Path]:
         axes.grid(alpha=0.3)
         save(figure, "particles.png")
     return written
+
+
+def _temperature_figures(pyplot, save, titled, time, data) -> None:
+    """temperatures.png: each body's min / mean / max temperature; heat.png: the heat each wall or solid gave
+    the particles (cumulative) beside the change of the heat content, which it balances."""
+    bodies: Dict[str, Dict[str, str]] = {}
+    for column in data:
+        match = _TEMPERATURE.match(column)
+        if match:
+            bodies.setdefault(match.group(1), {})[match.group(2)] = column
+    if any(not is_constant(data[column]) for columns in bodies.values() for column in columns.values()):
+        figure, axes = pyplot.subplots(figsize=(7, 4.5))
+        for index, (body, columns) in enumerate(bodies.items()):
+            color = f"C{index}"
+            if "mean" in columns:
+                axes.plot(time, data[columns["mean"]], color=color, label=f"{body} (mean)")
+            if "min" in columns and "max" in columns:
+                axes.fill_between(time, data[columns["min"]], data[columns["max"]], color=color, alpha=0.2,
+                                  label=f"{body} (min to max)")
+        axes.set_xlabel("time [s]")
+        axes.set_ylabel("temperature [K]")
+        titled(axes, "temperatures", "")
+        axes.legend(fontsize="small")
+        axes.grid(alpha=0.3)
+        save(figure, "temperatures.png")
+    flows = {match.group(1): column for column in data if (match := _HEAT.match(column))}
+    if any(not is_constant(data[column]) for column in flows.values()):
+        figure, axes = pyplot.subplots(figsize=(7, 4.5))
+        for body, column in flows.items():
+            axes.plot(time, data[column], label=f"given by {body}")
+        if "particle_thermal_energy" in data:
+            gained = data["particle_thermal_energy"] - data["particle_thermal_energy"][0]
+            axes.plot(time, gained, "k--", label="particles' heat content change")
+        axes.set_xlabel("time [s]")
+        axes.set_ylabel("heat [J]")
+        titled(axes, "heat given to the particles (cumulative)", "")
+        axes.legend(fontsize="small")
+        axes.grid(alpha=0.3)
+        save(figure, "heat.png")
 
 
 def _vector_figure(pyplot, save, time, data, vectors, title, symbol, unit, name) -> None:

@@ -285,6 +285,8 @@ class Simulation:
         if self.particle_system.heat:
             columns += ["thermal_energy", "particle_thermal_energy"]
             columns += [f"heat_{name}" for name in self.particle_system.heat_ledger.names]
+            columns += [f"temperature_{body}_{statistic}" for body in ["particles", *self._conducting_solids()]
+                        for statistic in ("min", "mean", "max")]
         for name in self._surface_names():
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
         for name in self._surface_names():
@@ -302,6 +304,7 @@ class Simulation:
         row.update(self.energies())
         if system.heat:
             row.update(self.heat_given())
+            row.update(self.temperature_statistics())
         names = self._surface_names()
         instantaneous = [self.wall_force(name) for name in names]
         # Before the first step of a run (or of a restart) no step has been averaged: the forces now.
@@ -395,6 +398,36 @@ class Simulation:
         start (negative: the particles heated it)."""
         ledger = self.particle_system.heat_ledger
         return {f"heat_{name}": float(value) for name, value in zip(ledger.names, ledger.settle(self.comm))}
+
+    def _conducting_solids(self) -> list:
+        return [name for name, solid in self.solids.items() if getattr(solid, "heat", None) is not None]
+
+    def temperature_statistics(self) -> dict:
+        """Collective: temperature_<body>_min/_mean/_max [K] of the particles (mean weighted by m c, so it is
+        the temperature their heat content would have if spread evenly) and of each conducting solid's
+        nodes (plain nodal mean)."""
+        from mpi4py import MPI
+
+        system = self.particle_system
+        state = system.state
+        owned = state.owned_count
+        temperatures = state.temperatures[:owned]
+        capacities = state.mass[:owned] * system.heat_capacities[state.material_index[:owned]]
+        sums = np.array([float(np.dot(capacities, temperatures)), float(capacities.sum())])
+        extremes = np.array([-temperatures.min() if owned else -np.inf, temperatures.max() if owned else -np.inf])
+        bodies = {"particles": (sums, extremes)}
+        for name in self._conducting_solids():
+            nodal = self.solids[name].temperatures
+            bodies[name] = (np.array([float(nodal.sum()), float(len(nodal))]),
+                            np.array([-nodal.min() if len(nodal) else -np.inf, nodal.max() if len(nodal) else -np.inf]))
+        row = {}
+        for body, (sums, extremes) in bodies.items():
+            self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+            self.comm.Allreduce(MPI.IN_PLACE, extremes, op=MPI.MAX)
+            row[f"temperature_{body}_min"] = -float(extremes[0])
+            row[f"temperature_{body}_mean"] = float(sums[0] / sums[1]) if sums[1] > 0 else float("nan")
+            row[f"temperature_{body}_max"] = float(extremes[1])
+        return row
 
     def dashpot_dissipation(self) -> float:
         """Collective: energy [J] the contact dashpots on solid surfaces dissipated beyond what the contact

@@ -253,3 +253,30 @@ def test_thermal_step_past_the_limit_is_warned_by_check_and_stops_the_run(tmp_pa
     scene["materials"]["grain"]["heat_capacity"] *= 10.0
     scene["output"]["dir"] = str(tmp_path / "out2")
     Simulation.from_dict(scene).run(progress=False)
+
+
+def test_history_columns_and_plots_of_a_heated_run(tmp_path):
+    """history.csv carries the heat columns; pdemfem plot draws temperatures.png and heat.png, and the
+    energies figure leaves the heat content out (it would dwarf the mechanical energies)."""
+    from pdemfem.plot import plot_history, read_history
+
+    scene, _ = _stack_scene(1.0e-3, 0.7e-3, floor_temperature=500.0, temperatures=(300.0, 350.0), end=0.01)
+    scene["output"] = {"dir": str(tmp_path / "out"), "every": 0.001}
+    sim = Simulation.from_dict(scene)
+    sim.run(progress=False)
+    history = read_history(tmp_path / "out" / "history.csv")
+    for column in ("thermal_energy", "particle_thermal_energy", "heat_floor", "temperature_particles_min",
+                   "temperature_particles_mean", "temperature_particles_max"):
+        assert column in history, column
+    # The particles' heat content changed by what the floor gave them (round-off of the content per step).
+    change = history["particle_thermal_energy"] - history["particle_thermal_energy"][0]
+    assert np.allclose(change, history["heat_floor"], rtol=0, atol=1e-12 * history["thermal_energy"][0])
+    assert history["temperature_particles_max"][0] == 350.0 and history["temperature_particles_min"][0] == 300.0
+    written = {path.name for path in plot_history(tmp_path / "out")}
+    assert {"temperatures.png", "heat.png"} <= written
+    import h5py
+
+    with h5py.File(tmp_path / "out" / "particles.h5", "r") as handle:
+        last = sorted(name for name in handle if name.startswith("step_"))[-1]
+        order = np.argsort(handle[last]["ids"][()])
+        assert np.array_equal(handle[last]["temperature"][()][order], _temperatures_by_id(sim))
