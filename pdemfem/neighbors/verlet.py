@@ -30,26 +30,28 @@ _FORWARD_OFFSETS = np.array(
 
 
 @njit(cache=True)
-def _fill_pairs(positions, radii, skin, owned_count, order, sorted_cells, starts, dimensions, forward_offsets,
-                material_index, cohesion_reach, offsets, partners):
-    """Write partners row by row (row p = particle order[p]); returns the pair count (may exceed capacity)."""
+def _fill_pairs(sorted_positions, sorted_radii, skin, owned_count, order, sorted_cells, starts, dimensions,
+                forward_offsets, sorted_materials, cohesion_reach, offsets, partners):
+    """Write partners row by row (row p = particle order[p]); returns the pair count (may exceed capacity).
+
+    The particles' positions, radii and materials come in cell order (row p's at p): the stencil's
+    candidates then sit side by side in memory instead of being gathered through `order`."""
     count = order.shape[0]
     capacity = partners.shape[0]
     nx, ny, nz = dimensions[0], dimensions[1], dimensions[2]
     written = 0
     for p in range(count):
         offsets[p] = written
-        i = order[p]
-        i_is_ghost = i >= owned_count
+        i_is_ghost = order[p] >= owned_count
         cell = sorted_cells[p]
         cx = cell % nx
         cy = (cell // nx) % ny
         cz = cell // (nx * ny)
-        xi = positions[i, 0]
-        yi = positions[i, 1]
-        zi = positions[i, 2]
-        reach = radii[i] + skin
-        material_i = material_index[i]
+        xi = sorted_positions[p, 0]
+        yi = sorted_positions[p, 1]
+        zi = sorted_positions[p, 2]
+        reach = sorted_radii[p] + skin
+        material_i = sorted_materials[p]
         for k in range(forward_offsets.shape[0] + 1):
             if k == 0:
                 # Own cell: later rows only.
@@ -65,15 +67,15 @@ def _fill_pairs(positions, radii, skin, owned_count, order, sorted_cells, starts
                 first = starts[neighbour_cell]
                 last = starts[neighbour_cell + 1]
             for q in range(first, last):
-                j = order[q]
-                if i_is_ghost and j >= owned_count:
-                    continue
-                dx = xi - positions[j, 0]
-                dy = yi - positions[j, 1]
-                dz = zi - positions[j, 2]
+                dx = xi - sorted_positions[q, 0]
+                dy = yi - sorted_positions[q, 1]
+                dz = zi - sorted_positions[q, 2]
                 # A cohesive pair interacts until its pull-off distance beyond touching.
-                cutoff = reach + radii[j] + cohesion_reach[material_i, material_index[j]]
+                cutoff = reach + sorted_radii[q] + cohesion_reach[material_i, sorted_materials[q]]
                 if dx * dx + dy * dy + dz * dz < cutoff * cutoff:
+                    j = order[q]
+                    if i_is_ghost and j >= owned_count:
+                        continue
                     if written < capacity:
                         partners[written] = j
                     written += 1
@@ -131,9 +133,11 @@ class VerletList:
         offsets = np.empty(count + 1, dtype=np.int64)
         # One pass when the capacity guess (last size + margin) suffices, two otherwise.
         partners = np.empty(int(1.25 * self.pair_count) + 4 * count, dtype=np.int32)
-        material_index = state.material_index if self.cohesion_reach.shape[0] > 1 else np.zeros(count, np.int32)
-        arguments = (state.positions, state.radii, skin, state.owned_count, order, sorted_cells, starts,
-                     dimensions, _FORWARD_OFFSETS, material_index, self.cohesion_reach, offsets)
+        sorted_materials = (state.material_index[order] if self.cohesion_reach.shape[0] > 1
+                            else np.zeros(count, np.int32))
+        arguments = (np.ascontiguousarray(state.positions[order]), state.radii[order], skin, state.owned_count,
+                     order, sorted_cells, starts, dimensions, _FORWARD_OFFSETS, sorted_materials,
+                     self.cohesion_reach, offsets)
         needed = _fill_pairs(*arguments, partners)
         if needed > len(partners):
             partners = np.empty(needed, dtype=np.int32)
