@@ -96,10 +96,10 @@ class ThermalConfig(StrictModel):
     theta: Annotated[float, Field(ge=0.5, le=1.0)] = Field(
         1.0, description="implicit only: 1 = backward Euler (1st order, monotone), 0.5 = Crank-Nicolson "
                          "(2nd order, oscillates for steps far above the explicit limit)")
-    fixed: List[FixedTemperatureConfig] = Field(default_factory=list, description="groups held at a temperature [K]")
-    flux: List[HeatFluxConfig] = Field(default_factory=list, description="uniform heat fluxes into the solid [W/m^2]")
+    fixed: List[FixedTemperatureConfig] = Field(default_factory=list, description="groups held at a temperature (Dirichlet)")
+    flux: List[HeatFluxConfig] = Field(default_factory=list, description="surface groups with a uniform heat flux into the solid")
     convection: List[ConvectionConfig] = Field(
-        default_factory=list, description="convective surfaces: h [W/(m^2 K)] and ambient temperature [K]")
+        default_factory=list, description="convective surface groups (Newton cooling toward an ambient temperature)")
 
     def groups(self) -> List[Tuple[str, int, str]]:
         """(kind, index, group) of every boundary entry, in the order fixed, flux, convection."""

@@ -71,3 +71,31 @@ def explicit_heat_update(temperature, conducted, capacity, source, conductance, 
         else:
             reaction[i] = 0.0
             temperature[i] += dt * rate / capacity[i]
+
+
+@njit(cache=True)
+def assemble_thermal_coupling_rows(coords, cells, n_owned, indptr, indices, mass_values, mass_grads, mass_weights,
+                                   coupling, mass):
+    """The thermal load and energy as matrices, on the owned-row CSR (mass rule: exact for both):
+
+    coupling[pos, d] += int grad_d N_a N_b dV   (thermal load f_a = 3 K alpha sum_b coupling_ab dT_b)
+    mass[pos] += int N_a N_b dV                 (thermal energy 9/2 K alpha^2 dT . mass dT)
+    """
+    nen = cells.shape[1]
+    jinv = np.empty((3, 3))
+    g = np.empty((nen, 3))
+    for c in range(cells.shape[0]):
+        det = cell_jacobian_inverse(coords, cells, c, jinv)
+        for q in range(mass_weights.shape[0]):
+            physical_gradients(mass_grads[q], jinv, g)
+            wq = mass_weights[q] * det
+            for a in range(nen):
+                row = cells[c, a]
+                if row >= n_owned:
+                    continue
+                for b in range(nen):
+                    pos = _find(indices, indptr[row], indptr[row + 1], cells[c, b])
+                    weight = wq * mass_values[q, b]
+                    mass[pos] += weight * mass_values[q, a]
+                    for d in range(3):
+                        coupling[pos, d] += weight * g[a, d]

@@ -162,6 +162,7 @@ class Solid(kinds.StateComponent):
         self.step_count = 0
         self.external_work = 0.0  # work of applied loads and supports since construction [J]
         self._thermal_energy = 0.0
+        self.heat = None  # the heat equation (heat.SolidHeat) when this solid conducts heat
         self.thermoelastic_work = 0.0  # strain energy the temperature changes of the heat path put in [J]
         self._critical_step = None
         self._omega_bound = None
@@ -176,7 +177,6 @@ class Solid(kinds.StateComponent):
         initial, reference = config.temperatures()
         self.reference_temperature = 293.15 if reference is None else reference
         self.set_temperature(self.reference_temperature if initial is None else initial)
-        self.heat = None
         if thermal is not None:
             from pdemfem.fem.heat import SolidHeat
 
@@ -209,6 +209,10 @@ class Solid(kinds.StateComponent):
 
     def _refresh_thermal_load(self) -> None:
         """Collective: the thermal load and its energy from the current temperatures."""
+        if self.heat is not None and self.heat.coupling_matrix is not None:
+            self._thermal_energy = self.heat.thermal_load(self.reference_temperature, self.thermal_load_vec)
+            self._update_base_load()
+            return
         delta_t = local_values(self.temperature_vec, 1)[:, 0] - self.reference_temperature
         load = np.zeros((self.n_owned_nodes, 3))
         energy = 0.0
