@@ -32,6 +32,7 @@ from pdemfem.fem.assemble import owned_row_pattern
 from pdemfem.fem.config import ThermalConfig
 from pdemfem.fem.heat_kernels import (assemble_conductivity_rows, assemble_thermal_coupling_rows, explicit_heat_update,
                                       face_node_areas)
+from pdemfem.fem.static import is_diagonal
 
 OPTIONS_PREFIX = "fem_heat_"
 # Implicit solve tolerance (relative residual): the temperature error it leaves is ~1e-10 of the
@@ -199,7 +200,7 @@ class SolidHeat:
         """Not collective: heat flows [W] into nodes of any rank, applied over the next advance, then cleared."""
         indices = np.asarray(global_node_indices, dtype=PETSc.IntType).ravel()
         if len(indices):
-            flows = np.ascontiguousarray(heat_flows, dtype=float).ravel()
+            flows = np.ascontiguousarray(heat_flows, dtype=float).reshape(len(indices))
             self.nodal_heat_vec.setValues(indices, flows, PETSc.InsertMode.ADD_VALUES)
 
     def thermal_energy(self) -> float:
@@ -276,7 +277,10 @@ class SolidHeat:
             self._solver.setTolerances(rtol=HEAT_SOLVE_RTOL, atol=1e-300, max_it=5000)
             self._solver.setInitialGuessNonzero(True)  # the current temperatures
         ratio = dt * self.largest_eigenvalue_bound() / 2.0  # dt in explicit limits
-        self._solver.getPC().setType(PETSc.PC.Type.JACOBI if ratio <= JACOBI_RATIO else PETSc.PC.Type.GAMG)
+        # With every neighbour of every free node fixed the operator is diagonal: GAMG finds no graph to
+        # coarsen (its set-up fails on several ranks), while Jacobi is exact.
+        jacobi = ratio <= JACOBI_RATIO or is_diagonal(constrained)
+        self._solver.getPC().setType(PETSc.PC.Type.JACOBI if jacobi else PETSc.PC.Type.GAMG)
         self._solver.setOperators(constrained)
         self._solver.setFromOptions()
         # (A 1_free) on every row: the residual change of a uniform shift of the free temperatures.
