@@ -58,7 +58,7 @@ def total_energy(energies: dict) -> float:
     return (energies["kinetic_energy"] + energies["rotational_energy"] + energies["potential_energy"]
             + energies["elastic_energy"] + energies["dissipated_energy"] - energies["wall_work"]
             + energies.get("solid_kinetic_energy", 0.0) + energies.get("solid_strain_energy", 0.0)
-            + energies.get("solid_load_potential", 0.0))
+            + energies.get("solid_load_potential", 0.0) - energies.get("thermoelastic_work", 0.0))
 
 
 # Heat content (m c T, relative to 0 K) is orders of magnitude above the mechanical energies and
@@ -124,6 +124,7 @@ class DivergenceMonitor:
             "stored": sum(max(energies.get(name, 0.0), 0.0) for name in _STORED) - placed_inside,
             "potential": _potential(energies),
             "wall_work": energies["wall_work"],
+            "thermoelastic_work": energies.get("thermoelastic_work", 0.0),
             "lost": system.lost_particles,
             "step": self.sim.step_count,
             "magnitude": _mechanical_magnitude(energies),
@@ -186,7 +187,8 @@ class DivergenceMonitor:
         potential = _potential(energies)
         self.lowest_potential = min(self.lowest_potential, potential)
         available = (baseline["stored"] + (baseline["potential"] - self.lowest_potential)
-                     + abs(energies["wall_work"] - baseline["wall_work"]))
+                     + abs(energies["wall_work"] - baseline["wall_work"])
+                     + abs(energies.get("thermoelastic_work", 0.0) - baseline["thermoelastic_work"]))
         created = total_energy(energies) - baseline["total"]
         floor = ROUND_OFF * max(baseline["magnitude"], _mechanical_magnitude(energies))
         if created > available + floor:

@@ -4,7 +4,8 @@
                                   reactions.png, deflections.png, temperatures.png, heat.png
                                   (those with data)
 
-Columns used (missing ones are skipped): ``time``; every ``*_energy`` column and ``wall_work``;
+Columns used (missing ones are skipped): ``time``; every ``*_energy`` column, ``wall_work`` and
+``thermoelastic_work``;
 ``mean_force_<wall>_x/_y/_z`` per wall and contact solid (the mean over each output interval;
 ``force_<wall>_*``, the value at the output time, when a history has no means);
 ``reaction_<solid>_<group>_x/_y/_z``; ``max_displacement_<solid>``; ``particles`` and ``contacts``;
@@ -128,7 +129,8 @@ def plot_history(outdir) -> List[Path]:
     def titled(axes, title, note):
         axes.set_title(title + (f"\n({note})" if note else ""), fontsize="medium")
 
-    energies = [name for name in data if (name.endswith("_energy") or name in ("wall_work", "solid_load_potential"))
+    fed_in = ("wall_work", "thermoelastic_work")  # work done on the system, subtracted from the total
+    energies = [name for name in data if (name.endswith("_energy") or name in (*fed_in, "solid_load_potential"))
                 and name not in _THERMAL]
     varying = [name for name in energies if not is_constant(data[name])]
     if varying:
@@ -137,7 +139,8 @@ def plot_history(outdir) -> List[Path]:
             axes.plot(time, data[name], label=name.replace("_", " "))
         if len(energies) > 1:
             # The bookkeeping total (pdemfem.monitor.total_energy): wall work is fed in, not held.
-            total = sum(data[name] for name in energies if name != "wall_work") - data.get("wall_work", 0.0)
+            total = (sum(data[name] for name in energies if name not in fed_in)
+                     - sum(data.get(name, 0.0) for name in fed_in))
             axes.plot(time, total, "k--", label="total (conserved up to integration error)")
         axes.set_xlabel("time [s]")
         axes.set_ylabel("energy [J]")

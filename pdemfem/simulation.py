@@ -171,8 +171,13 @@ class Simulation:
 
         solids = {}
         for config in self.scene.solids:
-            solid = Solid(config, self.scene.materials[config.material], gravity=self.scene.gravity,
-                          comm=self.comm, base_dir=self.base_dir)
+            material = self.scene.materials[config.material]
+            # With heat on, a solid whose material gives both thermal keys conducts (a `thermal:` block makes
+            # it conduct and requires them); otherwise it is adiabatic and nothing thermal is allocated.
+            conducts = (self.scene.heat_enabled and material.conductivity is not None
+                        and material.heat_capacity is not None)
+            solid = Solid(config, material, gravity=self.scene.gravity, comm=self.comm, base_dir=self.base_dir,
+                          heat=conducts)
             held = self.comm.allreduce(int(solid.constrained_dofs.sum()))
             if held:
                 solid.static_solve()
@@ -282,11 +287,15 @@ class Simulation:
                    "elastic_energy", "dissipated_energy", "wall_work", "contacts", "lost_particles"]
         if self.solids:
             columns += ["solid_kinetic_energy", "solid_strain_energy", "solid_load_potential"]
+        if self._conducting_solids():
+            columns += ["thermoelastic_work"]
         if self.particle_system.heat:
             columns += ["thermal_energy", "particle_thermal_energy"]
             columns += [f"heat_{name}" for name in self.particle_system.heat_ledger.names]
             columns += [f"temperature_{body}_{statistic}" for body in ["particles", *self._conducting_solids()]
                         for statistic in ("min", "mean", "max")]
+            columns += [f"boundary_heat_{name}_{book}" for name in self._conducting_solids()
+                        for book in self.solids[name].boundary_heat()]
         for name in self._surface_names():
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
         for name in self._surface_names():
@@ -305,6 +314,9 @@ class Simulation:
         if system.heat:
             row.update(self.heat_given())
             row.update(self.temperature_statistics())
+            for name in self._conducting_solids():
+                for book, value in self.solids[name].boundary_heat().items():
+                    row[f"boundary_heat_{name}_{book}"] = value
         names = self._surface_names()
         instantaneous = [self.wall_force(name) for name in names]
         # Before the first step of a run (or of a restart) no step has been averaged: the forces now.
@@ -385,6 +397,10 @@ class Simulation:
         # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
         energies["solid_load_potential"] = -sum(solid.constant_load_vec.dot(solid.displacement_vec)
                                                 for solid in self.solids.values())
+        conducting = [solid for solid in self.solids.values() if getattr(solid, "heat", None) is not None]
+        if conducting:
+            # Strain energy the thermal load's refreshes put in (work fed in, like a moving wall's).
+            energies["thermoelastic_work"] = sum(solid.thermoelastic_work for solid in conducting)
         if self.particle_system.heat:
             # Heat content m c T [J] (relative to 0 K) of the particles, and of the solids that conduct.
             particle_heat = self.particle_system.thermal_energy
@@ -437,11 +453,9 @@ class Simulation:
     def total_energy(self) -> float:
         """Everything the bookkeeping tracks; constant up to integration error when no work is
         fed in other than by moving walls (subtracted)."""
-        energies = self.energies()
-        return (energies["kinetic_energy"] + energies["rotational_energy"] + energies["potential_energy"]
-                + energies["elastic_energy"] + energies["dissipated_energy"] - energies["wall_work"]
-                + energies["solid_kinetic_energy"] + energies["solid_strain_energy"]
-                + energies["solid_load_potential"])
+        from pdemfem.monitor import total_energy
+
+        return total_energy(self.energies())
 
     def solid_reaction(self, solid: str, group: str) -> np.ndarray:
         """Total reaction force of a solid's support group (summed over ranks)."""

@@ -65,6 +65,48 @@ class PointForceConfig(StrictModel):
     force: Vector3 = Field(description="constant force [N]")
 
 
+class FixedTemperatureConfig(StrictModel):
+    """A group held at a constant temperature (Dirichlet)."""
+
+    group: str = Field(description="a boundary group of the mesh, or a box face xmin..zmax")
+    temperature: PositiveFloat = Field(description="the group's temperature [K]")
+
+
+class HeatFluxConfig(StrictModel):
+    """A uniform heat flux through a surface group."""
+
+    group: str = Field(description="a boundary group of the mesh, or a box face xmin..zmax")
+    flux: float = Field(description="heat flux into the solid [W/m^2] (negative: out of it)")
+
+
+class ConvectionConfig(StrictModel):
+    """Newton cooling of a surface group: heat flux h (T_ambient - T) into the solid."""
+
+    group: str = Field(description="a boundary group of the mesh, or a box face xmin..zmax")
+    coefficient: NonNegativeFloat = Field(description="heat transfer coefficient h [W/(m^2 K)]")
+    ambient: PositiveFloat = Field(description="ambient temperature [K]")
+
+
+class ThermalConfig(StrictModel):
+    """Transient heat conduction rho c dT/dt = div(k grad T) in the solid (material conductivity, heat_capacity)."""
+
+    scheme: Literal["explicit", "implicit"] = Field(
+        "explicit", description="explicit: lumped capacity, forward Euler, sub-stepped below its stability limit; "
+                                "implicit: theta-scheme, one CG solve per advance")
+    theta: Annotated[float, Field(ge=0.5, le=1.0)] = Field(
+        1.0, description="implicit only: 1 = backward Euler (1st order, monotone), 0.5 = Crank-Nicolson "
+                         "(2nd order, oscillates for steps far above the explicit limit)")
+    fixed: List[FixedTemperatureConfig] = Field(default_factory=list, description="groups held at a temperature (Dirichlet)")
+    flux: List[HeatFluxConfig] = Field(default_factory=list, description="surface groups with a uniform heat flux into the solid")
+    convection: List[ConvectionConfig] = Field(
+        default_factory=list, description="convective surface groups (Newton cooling toward an ambient temperature)")
+
+    def groups(self) -> List[Tuple[str, int, str]]:
+        """(kind, index, group) of every boundary entry, in the order fixed, flux, convection."""
+        return [(kind, index, entry.group) for kind in ("fixed", "flux", "convection")
+                for index, entry in enumerate(getattr(self, kind))]
+
+
 class SolidConfig(StrictModel):
     name: str = Field(description="unique solid name (shares one namespace with the walls)")
     mesh: Union[str, BoxMeshConfig] = Field(
@@ -86,6 +128,9 @@ class SolidConfig(StrictModel):
     reference_temperature: Optional[PositiveFloat] = Field(
         None, description="stress-free temperature T0 [K]; default: the initial temperature"
     )
+    thermal: Optional[ThermalConfig] = Field(
+        None, description="heat conduction in the solid and its boundary conditions; absent: the temperature "
+                          "stays as set (unless the scene's heat switch is on)")
 
     @model_validator(mode="after")
     def _distinct_groups(self):

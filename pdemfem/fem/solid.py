@@ -5,6 +5,8 @@
     dt_max = solid.critical_time_step()       # proven bound (see stability.py)
     solid.add_nodal_forces(nodes, forces)     # any rank, any node: particle contact forces
     solid.step(dt)                            # one explicit central-difference step
+    solid.add_nodal_heat(nodes, flows)        # heat on (thermal: or heat=True): particle heat flows [W]
+    solid.advance(interval)                   # sub-cycled mechanics, then the temperatures (heat.py)
 
 All methods are collective unless stated otherwise; nodal arrays hold the nodes
 this rank owns (global numbers solid.global_node_range), cell arrays the cells it owns.
@@ -20,10 +22,10 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from pdemfem import state_dict as kinds
-from pdemfem.errors import MeshError, SolverError
+from pdemfem.errors import MeshError, SceneError, SolverError
 from pdemfem.fem import kernels
 from pdemfem.fem.assemble import assemble_operators, ghosted_vector, local_values
-from pdemfem.fem.config import SolidConfig
+from pdemfem.fem.config import SolidConfig, ThermalConfig
 from pdemfem.fem.elements import reference_element
 from pdemfem.fem.mesh import load_mesh
 from pdemfem.fem.partition import distribute_mesh
@@ -48,8 +50,33 @@ def _sum(comm, value: float) -> float:
     return float(buffer[0])
 
 
+def _heat_properties(config: SolidConfig, material) -> tuple:
+    """(conductivity, heat_capacity) of a solid that conducts heat; SceneError naming the missing key."""
+    examples = {"conductivity": "W/(m K); steel ~50, rubber ~0.15", "heat_capacity": "J/(kg K); steel ~490, rubber ~2000"}
+    for key, example in examples.items():
+        if getattr(material, key, None) is None:
+            raise SceneError(
+                f"materials.{config.material}.{key}",
+                f"solid '{config.name}' conducts heat (its thermal: key or the scene's heat switch) but its material "
+                f"has no {key}",
+                f"add {key}: <value> [{example}] to materials.{config.material}, or turn heat off for this solid")
+    return float(material.conductivity), float(material.heat_capacity)
+
+
+def _raise_thermal_group_error(name: str, error: MeshError, mechanical_groups, thermal_groups) -> None:
+    """Re-raise a mesh group error as a SceneError naming the thermal key when only that key names the group."""
+    for kind, index, group in thermal_groups:
+        if error.where.endswith(f"group '{group}'") and group not in mechanical_groups:
+            raise SceneError(f"solids ({name}).thermal.{kind}[{index}].group", f"{error.where}: {error.problem}",
+                             error.fix) from None
+    raise error
+
+
 class Solid(kinds.StateComponent):
-    def __init__(self, config: SolidConfig, material, gravity=(0.0, 0.0, -9.81), comm=MPI.COMM_WORLD, base_dir=Path(".")):
+    def __init__(self, config: SolidConfig, material, gravity=(0.0, 0.0, -9.81), comm=MPI.COMM_WORLD, base_dir=Path("."),
+                 heat: bool = False):
+        """heat=True (the scene's heat switch) or a `thermal:` entry turn heat conduction on (solid.heat);
+        otherwise solid.heat is None and the temperature changes only through set_temperature."""
         self.config = config
         self.material = material
         self.comm = comm
@@ -66,11 +93,19 @@ class Solid(kinds.StateComponent):
         self.lumped = config.mass == "lumped"
         self.damping_alpha, self.damping_beta = config.damping.alpha, config.damping.beta
 
+        thermal = config.thermal if config.thermal is not None else (ThermalConfig() if heat else None)
+        if thermal is not None:
+            properties = _heat_properties(config, material)
         groups = list(config.fixed) + [p.group for p in config.prescribed] + [t.group for t in config.tractions]
-        self.mesh = distribute_mesh(
-            comm, lambda: load_mesh(config.mesh, Path(base_dir)), config.element, groups, list(config.contact),
-            [p.point for p in config.point_forces],
-        )
+        thermal_groups = [] if thermal is None else thermal.groups()
+        try:
+            self.mesh = distribute_mesh(
+                comm, lambda: load_mesh(config.mesh, Path(base_dir)), config.element,
+                groups + [group for _, _, group in thermal_groups], list(config.contact),
+                [p.point for p in config.point_forces],
+            )
+        except MeshError as error:
+            _raise_thermal_group_error(config.name, error, groups, thermal_groups)
         mesh = self.mesh
         self.n_owned_nodes = mesh.n_owned_nodes
         self.global_node_range = mesh.node_range
@@ -127,6 +162,8 @@ class Solid(kinds.StateComponent):
         self.step_count = 0
         self.external_work = 0.0  # work of applied loads and supports since construction [J]
         self._thermal_energy = 0.0
+        self.heat = None  # the heat equation (heat.SolidHeat) when this solid conducts heat
+        self.thermoelastic_work = 0.0  # strain energy the temperature changes of the heat path put in [J]
         self._critical_step = None
         self._omega_bound = None
         self._static_solver = None
@@ -140,6 +177,11 @@ class Solid(kinds.StateComponent):
         initial, reference = config.temperatures()
         self.reference_temperature = 293.15 if reference is None else reference
         self.set_temperature(self.reference_temperature if initial is None else initial)
+        if thermal is not None:
+            from pdemfem.fem.heat import SolidHeat
+
+            self.heat = SolidHeat(self, thermal, *properties)  # sets the fixed groups' temperatures
+            self._refresh_thermal_load()
         self._set_velocity_from_constraints()
 
     # ------------------------------------------------------------------ loads
@@ -163,6 +205,14 @@ class Solid(kinds.StateComponent):
         """Collective: nodal temperature [K] of the owned nodes (array (n_owned,) or a scalar); rebuilds the thermal load."""
         values = np.broadcast_to(np.asarray(nodal_temperatures, dtype=float), (self.n_owned_nodes,))
         self.temperature_vec.setArray(values)
+        self._refresh_thermal_load()
+
+    def _refresh_thermal_load(self) -> None:
+        """Collective: the thermal load and its energy from the current temperatures."""
+        if self.heat is not None and self.heat.coupling_matrix is not None:
+            self._thermal_energy = self.heat.thermal_load(self.reference_temperature, self.thermal_load_vec)
+            self._update_base_load()
+            return
         delta_t = local_values(self.temperature_vec, 1)[:, 0] - self.reference_temperature
         load = np.zeros((self.n_owned_nodes, 3))
         energy = 0.0
@@ -182,6 +232,35 @@ class Solid(kinds.StateComponent):
         forces = np.ascontiguousarray(forces, dtype=float).reshape(len(indices), 3)
         if len(indices):
             self.nodal_force_vec.setValuesBlocked(indices, forces.ravel(), PETSc.InsertMode.ADD_VALUES)
+
+    # ------------------------------------------------------------------ heat
+    def _heat_or_error(self):
+        if self.heat is None:
+            raise RuntimeError(f"solid '{self.name}' does not conduct heat (no thermal: key and heat=False)")
+        return self.heat
+
+    def add_nodal_heat(self, global_node_indices, heat_flows) -> None:
+        """Not collective: heat flows (n,) [W] into nodes of any rank (like add_nodal_forces), held constant over
+        the next advance (or step), then cleared: the solid receives exactly sum(heat_flows) * interval [J]."""
+        self._heat_or_error().add_nodal_heat(global_node_indices, heat_flows)
+
+    def thermal_energy(self) -> float:
+        """Collective: heat content sum_i C_i T_i [J] (lumped capacity C_i = c m_i, T in K, relative to 0 K)."""
+        return self._heat_or_error().thermal_energy()
+
+    def boundary_heat(self) -> dict:
+        """Not collective: heat [J] that entered through each thermal boundary entry since construction,
+        keyed '<kind>_<group>' (fixed_<g>, flux_<g>, convection_<g>; negative: the heat left)."""
+        return self._heat_or_error().boundary_heat()
+
+    @property
+    def nodal_heat_added(self) -> float:
+        """Heat [J] put in through add_nodal_heat since construction (the same on every rank)."""
+        return self._heat_or_error().nodal_heat_added
+
+    def heat_critical_time_step(self) -> float:
+        """Collective: the explicit heat scheme's stability limit 2 / lambda_max(C^-1 (K + H)) [s] (a lower bound)."""
+        return self._heat_or_error().critical_time_step()
 
     def add_contact_dampers(self, global_node_indices, tensors, targets) -> None:
         """Not collective: add contact dashpots acting in the next step/advance (then cleared).
@@ -302,6 +381,7 @@ class Solid(kinds.StateComponent):
         self._gather_dampers()
         self._advance(dt, clear_nodal=True)
         self._damped_nodes = self._damped_nodes[:0]
+        self._advance_heat(dt)
 
     def advance(self, interval: float) -> int:
         """Collective: cover `interval` with the fewest equal stable steps (sub-cycling); returns their number.
@@ -315,7 +395,21 @@ class Solid(kinds.StateComponent):
         for substep in range(substeps):
             self._advance(dt, clear_nodal=substep == substeps - 1)
         self._damped_nodes = self._damped_nodes[:0]
+        self._advance_heat(interval)
         return substeps
+
+    def _advance_heat(self, interval: float) -> None:
+        """Collective: temperatures over the interval just covered, then the thermal load they give (the
+        mechanics of the next advance sees it: a staggered, one-advance-lagged thermo-elastic coupling)."""
+        if self.heat is None:
+            return
+        _, changed = self.heat.advance(interval)
+        if changed and self._thermal_load_coefficient != 0.0:
+            # The strain energy 1/2 u.K u - f_th.u + E_th jumps at fixed u when the thermal load changes:
+            # book it, so an energy balance of the solid can close.
+            before = self._thermal_energy - self.thermal_load_vec.dot(self.displacement_vec)
+            self._refresh_thermal_load()
+            self.thermoelastic_work += self._thermal_energy - self.thermal_load_vec.dot(self.displacement_vec) - before
 
     def _check_step(self, dt: float) -> None:
         limit = self.critical_time_step()
@@ -446,6 +540,9 @@ class Solid(kinds.StateComponent):
         state["time"] = kinds.scalar(float(self.time))
         state["step_count"] = kinds.scalar(int(self.step_count))
         state["external_work"] = kinds.scalar(float(self.external_work))
+        if self.heat is not None:
+            state["heat"] = self.heat.state_dict(nodes)
+            state["heat"]["thermoelastic_work"] = kinds.scalar(float(self.thermoelastic_work))
         return state
 
     def load_state_dict(self, state: dict) -> None:
@@ -463,6 +560,12 @@ class Solid(kinds.StateComponent):
         self.displacement_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
         self.time, self.step_count = float(state["time"]), int(state["step_count"])
         self.external_work = float(state["external_work"])
+        if (self.heat is None) != ("heat" not in state):
+            here, there = ("does not", "does") if self.heat is None else ("does", "does not")
+            raise kinds.StateMismatch(f"solid '{self.name}' {here} conduct heat in this scene, it {there} in the checkpoint")
+        if self.heat is not None:
+            self.heat.load_state_dict(state["heat"], nodes)
+            self.thermoelastic_work = float(state["heat"]["thermoelastic_work"])
         # The dashpot work since the checkpoint (the coupling keeps the total up to it).
         self.damper_work_local = 0.0
 
