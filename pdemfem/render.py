@@ -244,9 +244,12 @@ class _Picture:
     """What a picture shows, read from a run's files: the last step's particles and solid surfaces,
     the scene's walls, and the box [low, high] that holds them."""
 
-    def __init__(self, outdir, loaded, time, positions, radii, speeds, solid_names, surfaces, low, high):
+    def __init__(self, outdir, loaded, time, positions, radii, speeds, solid_names, surfaces, low, high,
+                 temperatures=None):
         self.outdir, self.loaded, self.time = outdir, loaded, time
         self.positions, self.radii, self.speeds = positions, radii, speeds
+        # With heat on the particles are coloured by temperature instead of speed.
+        self.temperatures = temperatures
         self.solid_names, self.surfaces, self.low, self.high = solid_names, surfaces, low, high
 
     @classmethod
@@ -263,8 +266,9 @@ class _Picture:
         positions = np.zeros((0, 3))
         radii = np.zeros(0)
         speeds = None
+        temperatures = None
         if particles_file.is_file():
-            time, fields = _last_step(particles_file, ["positions", "radii", "velocities"])
+            time, fields = _last_step(particles_file, ["positions", "radii", "velocities", "temperature"])
             if "positions" not in fields:
                 raise PdemfemError(str(particles_file), "the run wrote no particle positions",
                                    "add positions to output.particles and re-run")
@@ -272,6 +276,7 @@ class _Picture:
             radii = fields.get("radii", np.full(len(positions), 0.0))
             if "velocities" in fields:
                 speeds = np.linalg.norm(fields["velocities"], axis=1)
+            temperatures = fields.get("temperature")
         if loaded is not None:
             solid_names = [solid.name for solid in loaded[0].solids]
         else:
@@ -298,7 +303,8 @@ class _Picture:
             least = 6.0 * 2.0 * float(radii.max())
             centre = 0.5 * (low + high)
             low, high = np.minimum(low, centre - 0.5 * least), np.maximum(high, centre + 0.5 * least)
-        return cls(outdir, loaded, time, positions, radii, speeds, solid_names, surfaces, low, high)
+        return cls(outdir, loaded, time, positions, radii, speeds, solid_names, surfaces, low, high,
+                   temperatures=temperatures)
 
     def wall_polygons(self) -> List[np.ndarray]:
         """The scene's walls inside the picture's box (none without the scene)."""
@@ -334,12 +340,13 @@ def _draw_matplotlib(picture: _Picture, target: Path, label: str) -> None:
         # longest axis's drawn length in points (about 0.45 of the figure's width at the default view).
         points_per_metre = 0.45 * PICTURE_INCHES[0] * 72.0 / span
         sizes = (2.0 * radii * points_per_metre) ** 2
-        colour = speeds if speeds is not None else "tab:blue"
+        hot = picture.temperatures is not None
+        colour = picture.temperatures if hot else (speeds if speeds is not None else "tab:blue")
         drawn = axes.scatter(positions[:, 0], positions[:, 1], positions[:, 2], s=sizes, c=colour,
-                             cmap="viridis", depthshade=True, edgecolors="none", zorder=2)
-        if speeds is not None:
+                             cmap="inferno" if hot else "viridis", depthshade=True, edgecolors="none", zorder=2)
+        if hot or speeds is not None:
             bar = figure.colorbar(drawn, ax=axes, shrink=0.6, pad=0.1)
-            bar.set_label("speed [m/s]")
+            bar.set_label("temperature [K]" if hot else "speed [m/s]")
     axes.set_xlabel("x [m]", fontsize="small")
     axes.set_ylabel("y [m]", fontsize="small")
     axes.set_zlabel("z [m]", fontsize="small")
@@ -443,7 +450,8 @@ def _draw_paraview(pvpython: str, picture: _Picture, target: Path, label: str) -
         scratch = Path(scratch)
         job = {"particles": None, "solids": [], "walls": None, "target": str(target.resolve()),
                "size": list(PICTURE_SIZE), "title": label,
-               "box": [picture.low.tolist(), picture.high.tolist()], "elevation": VIEW_ELEVATION, "azimuth": VIEW_AZIMUTH}
+               "box": [picture.low.tolist(), picture.high.tolist()], "elevation": VIEW_ELEVATION, "azimuth": VIEW_AZIMUTH,
+               "color_by_temperature": picture.temperatures is not None}
         if len(picture.positions) and (picture.outdir / "particles.xdmf").is_file():
             job["particles"] = str((picture.outdir / "particles.xdmf").resolve())
         job["solids"] = [str((picture.outdir / f"{name}.xdmf").resolve()) for name in picture.solid_names
@@ -565,7 +573,8 @@ def _gallery_page(paths, drawn_by) -> str:
              "<!-- Written by `pdemfem render --gallery`, which runs every examples/*.yaml and draws its last "
              "output step. -->", "",
              "The last output step of every example in `examples/`, as `pdemfem render --gallery` draws it",
-             "(particles coloured by speed, solids by the magnitude of their displacement, walls translucent).",
+             "(particles coloured by speed, solids by the magnitude of their displacement, walls translucent;",
+             "with heat on, particles and solids by temperature on one scale).",
              *([f"These pictures were drawn by {drawn_by[0]}."] if same else []),
              "Run one yourself: `pdemfem run examples/<name>.yaml -o out/<name>`, then",
              "`pdemfem render out/<name> --scene examples/<name>.yaml`, or open the XDMF files in ParaView.",

@@ -11,6 +11,8 @@ title and viewing direction) and runs this script in a subprocess; the script dr
 - each solid's ``<solid>.xdmf`` surface warped by its ``displacements`` (true scale), coloured by
   the displacement's magnitude,
 - the walls from a legacy VTK polygon file (translucent),
+- with ``color_by_temperature`` (heat on: the particles wrote ``temperature``), the particles and the
+  solids coloured by ``temperature`` on one shared scale instead,
 
 fits the camera to everything and saves the PNG.  On success it prints one JSON line
 (``{"time": ..., "particles": N, "solids": [...], "paraview": "5.11.0"}``); any failure is a
@@ -63,6 +65,26 @@ def color_by_magnitude(display, reader, view, name, preset, title, bars):
     return bars + 1
 
 
+def color_by_temperature(displays, readers, view, bars):
+    """Colour every display by point array ``temperature`` on one scale spanning all readers' values,
+    with one legend; returns the number of legends now shown."""
+    low, high = math.inf, -math.inf
+    for reader in readers:
+        if "temperature" in point_array_names(reader):
+            first, last = reader.PointData["temperature"].GetRange(0)
+            low, high = min(low, first), max(high, last)
+    if not math.isfinite(low):
+        return bars
+    lookup = GetColorTransferFunction("temperature")
+    lookup.ApplyPreset("Inferno (matplotlib)", True)
+    for display in displays:
+        ColorBy(display, ("POINTS", "temperature"))
+    lookup.RescaleTransferFunction(low, high if high > low else low + 1.0)
+    lookup.AutomaticRescaleRangeMode = "Never"
+    lookup_bar(view, lookup, "temperature [K]", bars)
+    return bars + 1
+
+
 def main(job_file):
     with open(job_file) as handle:
         job = json.load(handle)
@@ -80,6 +102,8 @@ def main(job_file):
               "solids": []}
     time = None
     bars = 0
+    heat = bool(job.get("color_by_temperature"))
+    heated = []  # (display, reader) coloured by temperature at the end, on one scale
 
     if job.get("walls"):
         walls = Show(LegacyVTKReader(FileNames=[job["walls"]]), view)
@@ -97,7 +121,9 @@ def main(job_file):
         surface = ExtractSurface(Input=source)
         surface.UpdatePipeline(solid_time)
         display = Show(surface, view)
-        if "displacements" in point_array_names(reader):
+        if heat and "temperature" in point_array_names(reader):
+            heated.append((display, reader))
+        elif "displacements" in point_array_names(reader):
             bars = color_by_magnitude(display, reader, view, "displacements", "Plasma (matplotlib)",
                                       "displacement [m]", bars)
         display.EdgeColor = [0.2, 0.2, 0.2]
@@ -122,7 +148,9 @@ def main(job_file):
             glyphs.ScaleFactor = 2.0
         glyphs.UpdatePipeline(particle_time)
         display = Show(glyphs, view)
-        if "velocities" in names:
+        if heat and "temperature" in names:
+            heated.append((display, reader))
+        elif "velocities" in names:
             bars = color_by_magnitude(display, reader, view, "velocities", "Viridis (matplotlib)", "speed [m/s]",
                                       bars)
         else:
@@ -131,6 +159,8 @@ def main(job_file):
         time = particle_time
         report["particles"] = servermanager.Fetch(reader).GetNumberOfPoints()
 
+    if heated:
+        bars = color_by_temperature([display for display, _ in heated], [reader for _, reader in heated], view, bars)
     view.ViewTime = time or 0.0
     report["time"] = time
 
