@@ -25,11 +25,12 @@ Methods, chosen automatically:
   the midpoints of an n x n grid of square cells over the clump's x-y bounding rectangle.  Along
   each ray the chords of the spheres are merged into disjoint intervals, and int 1, z, z^2 over them
   are exact; the x-y integral is the midpoint rule.  The integrand (chord length and its moments) is
-  continuous with square-root edges and kinks, whose Fourier transform decays as |k|^(-5/2), so the
-  midpoint rule's error falls as n^(-5/2) (Poisson summation).  Measured on two overlapping spheres
-  against the exact formulas (tests/test_clumps_shape.py, docs/shapes.md).  The result carries an
-  error estimate: the change of mass and inertia from n/2 to n (which bounds the error at n when it
-  falls at least as n^(-1)).
+  continuous with square-root edges (a sphere's chord 2 sqrt(r^2 - rho^2)), whose 2-D Fourier
+  transform decays as |k|^(-2), so by Poisson summation the midpoint rule's error falls as n^(-2),
+  i.e. as 1/(number of rays).  Measured on two overlapping spheres against the exact formulas
+  (tests/test_clumps_shape.py, docs/shapes.md): relative error of mass and inertia <= 1.2e-5 at the
+  default n = 512 (about 1 ms for a few spheres).  The result carries an error estimate: the change of
+  mass and inertia from n/2 to n, about 3x the error at n for an n^(-2) decay.
 
 Given `mass` and/or `inertia` override the computed values: a mass alone scales the computed inertia
 (same shape, another density); an inertia (3 x 3 about the centre of mass, clump frame, or 3 values
@@ -46,7 +47,7 @@ from numba import njit
 from pdemfem.clumps.quaternion import quaternion_from_matrix
 from pdemfem.errors import SceneError
 
-DEFAULT_RAYS = 256
+DEFAULT_RAYS = 512
 
 
 @dataclass(frozen=True)
@@ -294,8 +295,11 @@ def _check_inertia(inertia, where):
 
 
 def sphere_union_mass_properties(centers, radii, density: float, *, mass=None, inertia=None,
-                                 rays: int = DEFAULT_RAYS, where: str = "clump") -> MassProperties:
-    """Mass properties of the union of spheres (centres (n, 3), radii (n,), metres; density kg/m^3)."""
+                                 rays: int = DEFAULT_RAYS, method: str = "auto", where: str = "clump") -> MassProperties:
+    """Mass properties of the union of spheres (centres (n, 3), radii (n,), metres; density kg/m^3).
+
+    method: "auto" (exact when possible, else the ray grid) or "rays" (the ray grid always).
+    """
     centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
     radii = np.asarray(radii, dtype=np.float64).reshape(-1)
     if len(radii) == 0 or len(radii) != len(centers):
@@ -303,27 +307,34 @@ def sphere_union_mass_properties(centers, radii, density: float, *, mass=None, i
                                 f"{len(radii)} radii)", "give spheres: [{position: [x, y, z], radius: r}, ...]")
     if not (np.isfinite(centers).all() and np.isfinite(radii).all() and (radii > 0).all()):
         raise SceneError(where, "sphere positions must be finite and radii positive", "fix the clump's spheres")
-    exact = exact_union_moments(centers, radii)
+    if method not in ("auto", "rays"):
+        raise ValueError(f"method must be 'auto' or 'rays', got {method!r}")
+    # Integrate about a point inside the clump (the r^3-weighted mean centre, the centre itself for one
+    # sphere): the central moments are then not differences of large numbers far from the origin.
+    reference = (radii ** 3) @ centers / (radii ** 3).sum()
+    centers = centers - reference
+    exact = exact_union_moments(centers, radii) if method == "auto" else None
     if exact is not None:
         volume, first, second = exact
-        method, error = "exact", 0.0
+        description, error = "exact", 0.0
     else:
         volume, first, second = ray_grid_moments(centers, radii, rays)
         coarse = ray_grid_moments(centers, radii, max(rays // 2, 1))
         m_fine, _, i_fine = _inertia_about_center(volume, first, second, 1.0)
         m_coarse, _, i_coarse = _inertia_about_center(*coarse, 1.0)
         error = max(abs(m_fine - m_coarse) / m_fine, np.abs(i_fine - i_coarse).max() / np.abs(i_fine).max())
-        method = f"ray grid n={rays}"
+        description = f"ray grid n={rays}"
     body_mass, center, body_inertia = _inertia_about_center(volume, first, second, float(density))
+    center = center + reference
     if mass is not None:
         mass = float(mass)
         if not mass > 0.0 or not math.isfinite(mass):
             raise SceneError(where, f"mass must be positive, got {mass}", "give the clump's mass in kg")
         body_inertia = body_inertia * (mass / body_mass)
         body_mass = mass
-        method += ", given mass"
+        description += ", given mass"
     if inertia is not None:
         body_inertia = _check_inertia(inertia, where)
-        method += ", given inertia"
+        description += ", given inertia"
     moments, orientation = principal_axes(body_inertia)
-    return MassProperties(float(body_mass), center, body_inertia, moments, orientation, method, float(error))
+    return MassProperties(float(body_mass), center, body_inertia, moments, orientation, description, float(error))
