@@ -172,7 +172,7 @@ def member_states(member_count, member_body, member_offsets, body_positions, bod
     """World state of member spheres from their bodies' state.
 
     member_offsets (m, 3): each member's centre relative to its body's centre of mass, in the body
-    principal frame (`shape.ClumpShape.member_offsets`).  r = R(q) offset;  x = x_b + r;
+    principal frame (`shape.MassProperties.member_offsets`).  r = R(q) offset;  x = x_b + r;
     v = v_b + omega x r;  the member spins with its body's omega.
     """
     rotation = np.empty((3, 3))
