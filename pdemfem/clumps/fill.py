@@ -35,7 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from pdemfem.clumps.shape import sphere_union_mass_properties
 from pdemfem.errors import MeshError
+from pdemfem.walls.readers import read_surface
 from pdemfem.walls.triangle_contact import point_triangle_distance_squared
 
 GRID_OFFSET = 1e-3 * np.sqrt([2.0, 3.0, 5.0])
@@ -283,8 +285,6 @@ def inside_grid(vertices, triangles, cells: int = 64, where: str = "surface") ->
 
 def fill_surface(vertices, triangles, count: int, cells: int = 64, where: str = "surface") -> SphereFill:
     """Up to `count` spheres inside the closed surface (vertices (n, 3), triangles (m, 3))."""
-    from pdemfem.clumps.shape import sphere_union_mass_properties
-
     if int(count) < 1:
         raise MeshError(where, f"spheres must be at least 1, got {count}", "give the number of spheres to fill with")
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -309,7 +309,5 @@ def fill_surface(vertices, triangles, count: int, cells: int = 64, where: str = 
 
 def fill_surface_file(path, count: int, scale: float = 1.0, cells: int = 64) -> SphereFill:
     """fill_surface of a surface mesh file (STL, .msh, ...; pdemfem.walls.readers.read_surface)."""
-    from pdemfem.walls.readers import read_surface
-
     vertices, triangles = read_surface(path, scale)
     return fill_surface(vertices, triangles, count, cells, where=str(path))

@@ -126,9 +126,9 @@ def drift_bodies(count, positions, velocities, orientations, angular_momenta, pr
 def angular_velocities_from_momenta(count, orientations, angular_momenta, principal_moments, out):
     """out[i] = omega (world) = R diag(1/I) R^T L."""
     rotation = np.empty((3, 3))
+    body_omega = np.empty(3)
     for i in range(count):
         rotation_matrix(orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3], rotation)
-        body_omega = np.empty(3)
         for row in range(3):
             body_omega[row] = (rotation[0, row] * angular_momenta[i, 0] + rotation[1, row] * angular_momenta[i, 1]
                                + rotation[2, row] * angular_momenta[i, 2]) / principal_moments[i, row]
@@ -141,9 +141,9 @@ def angular_velocities_from_momenta(count, orientations, angular_momenta, princi
 def angular_momenta_from_velocities(count, orientations, angular_velocities, principal_moments, out):
     """out[i] = L (world) = R diag(I) R^T omega: the initial condition from a given angular velocity."""
     rotation = np.empty((3, 3))
+    body_momentum = np.empty(3)
     for i in range(count):
         rotation_matrix(orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3], rotation)
-        body_momentum = np.empty(3)
         for row in range(3):
             body_momentum[row] = (rotation[0, row] * angular_velocities[i, 0] + rotation[1, row] * angular_velocities[i, 1]
                                   + rotation[2, row] * angular_velocities[i, 2]) * principal_moments[i, row]

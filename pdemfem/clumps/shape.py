@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from pdemfem.clumps.quaternion import quaternion_from_matrix
+from pdemfem.clumps.quaternion import quaternion_from_matrix, rotation_matrices
 from pdemfem.errors import SceneError
 
 DEFAULT_RAYS = 512
@@ -62,7 +62,6 @@ class MassProperties:
 
     def principal_axes(self) -> np.ndarray:
         """(3, 3) rotation matrix whose columns are the principal axes in the clump frame."""
-        from pdemfem.clumps.quaternion import rotation_matrices
         return rotation_matrices(self.principal_orientation)[0]
 
     def member_offsets(self, centers) -> np.ndarray:
