@@ -83,8 +83,8 @@ def test_two_spheres_exact_against_the_ray_grid_which_converges_as_n_squared():
         slope = np.polyfit(np.log(ns), np.log(errors), 1)[0]
         assert -2.5 <= slope <= -1.5, (slope, errors)
     # At the default n = 512: measured 2.7e-6 (mass) and 1.2e-5 (inertia); bound 16 / n^2 = 6e-5, the
-    # n^-2 law with the largest constant seen over n = 32..512 (3.6 n^-2 for the inertia at n = 32)
-    # times 4 for the lattice scatter.
+    # n^-2 law with the largest constant seen over n = 16..512 (3.0 n^-2, inertia at n = 16) times about 5
+    # for the lattice scatter.
     assert mass_errors[-1] <= 16 / 512 ** 2 and inertia_errors[-1] <= 16 / 512 ** 2
     # The estimate the result carries (n/2 -> n change) is not smaller than the true error.
     props = sphere_union_mass_properties(centers, radii, 1.0, method="rays")
