@@ -1,0 +1,66 @@
+"""Unit quaternions q = (w, x, y, z) for rotations: q rotates a body-frame vector into the world frame.
+
+Convention: R(q) v = q v q*, composition q_a (x) q_b applies q_b first.  The kernels work on
+single quaternions stored as rows of flat (n, 4) arrays.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def rotation_matrix(w, x, y, z, out):
+    """Fill out (3, 3) with R(q) of a unit quaternion."""
+    out[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    out[0, 1] = 2.0 * (x * y - w * z)
+    out[0, 2] = 2.0 * (x * z + w * y)
+    out[1, 0] = 2.0 * (x * y + w * z)
+    out[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    out[1, 2] = 2.0 * (y * z - w * x)
+    out[2, 0] = 2.0 * (x * z - w * y)
+    out[2, 1] = 2.0 * (y * z + w * x)
+    out[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+def rotation_matrices(orientations):
+    """(n, 3, 3) rotation matrices body -> world of (n, 4) unit quaternions (Python helper)."""
+    orientations = np.asarray(orientations, dtype=np.float64).reshape(-1, 4)
+    out = np.empty((len(orientations), 3, 3))
+    for i, (w, x, y, z) in enumerate(orientations):
+        rotation_matrix(w, x, y, z, out[i])
+    return out
+
+
+def quaternion_from_matrix(matrix):
+    """Unit quaternion (w >= 0) of a proper rotation matrix (Shepperd's method: the largest pivot avoids
+    dividing by a small number)."""
+    m = np.asarray(matrix, dtype=np.float64)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    pivots = [trace, m[0, 0], m[1, 1], m[2, 2]]
+    k = int(np.argmax(pivots))
+    if k == 0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif k == 1:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif k == 2:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    if q[0] < 0.0:
+        q = -q
+    return q / np.linalg.norm(q)
+
+
+def quaternion_from_axis_angle(axis, angle):
+    """Unit quaternion of a rotation by `angle` (radians) about `axis`."""
+    axis = np.asarray(axis, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    return np.concatenate([[math.cos(0.5 * angle)], math.sin(0.5 * angle) * axis])
