@@ -55,7 +55,7 @@ def total_energy(energies: dict) -> float:
     return (energies["kinetic_energy"] + energies["rotational_energy"] + energies["potential_energy"]
             + energies["elastic_energy"] + energies["dissipated_energy"] - energies["wall_work"]
             + energies.get("solid_kinetic_energy", 0.0) + energies.get("solid_strain_energy", 0.0)
-            + energies.get("solid_load_potential", 0.0))
+            + energies.get("solid_load_potential", 0.0) - energies.get("stream_energy", 0.0))
 
 
 class DivergenceMonitor:
@@ -112,6 +112,7 @@ class DivergenceMonitor:
             "stored": sum(max(energies.get(name, 0.0), 0.0) for name in _STORED) - placed_inside,
             "potential": _potential(energies),
             "wall_work": energies["wall_work"],
+            "stream_energy": energies.get("stream_energy", 0.0),
             "lost": system.lost_particles,
             "step": self.sim.step_count,
             "magnitude": sum(abs(value) for value in energies.values()),
@@ -166,7 +167,8 @@ class DivergenceMonitor:
         potential = _potential(energies)
         self.lowest_potential = min(self.lowest_potential, potential)
         available = (baseline["stored"] + (baseline["potential"] - self.lowest_potential)
-                     + abs(energies["wall_work"] - baseline["wall_work"]))
+                     + abs(energies["wall_work"] - baseline["wall_work"])
+                     + abs(energies.get("stream_energy", 0.0) - baseline["stream_energy"]))
         created = total_energy(energies) - baseline["total"]
         floor = ROUND_OFF * max(baseline["magnitude"], sum(abs(value) for value in energies.values()))
         if created > available + floor:
