@@ -130,6 +130,7 @@ class ParticleStreams(kinds.StateComponent):
         self.dt = float(dt)
         # Kinetic + rotational + potential (-m g.x) energy the inserted particles brought in [J].
         self.energy_in = 0.0
+        self._next_due_step = 0  # no event is due before this step (recomputed after each event)
 
     @classmethod
     def from_scene(cls, scene, material_names, next_id: int, dt: float):
@@ -171,6 +172,16 @@ class ParticleStreams(kinds.StateComponent):
     def insert_due(self, simulation) -> None:
         """Collective: run the events due at the start of this step (every rank, the same decisions)."""
         step = simulation.step_count
+        if step < self._next_due_step:
+            return
+        try:
+            self._insert_events(simulation, step)
+        finally:
+            self._next_due_step = min((stream.event_step(stream.last_event + 1, self.dt) for stream in self.streams
+                                       if stream.start + (stream.last_event + 1) * stream.interval < stream.stop),
+                                      default=math.inf)
+
+    def _insert_events(self, simulation, step: int) -> None:
         due = [(stream, stream.latest_due_event(step, self.dt)) for stream in self.streams]
         due = [(stream, event) for stream, event in due if event > stream.last_event]
         if not due:
@@ -180,7 +191,7 @@ class ParticleStreams(kinds.StateComponent):
         batches = []
         for stream, event in due:
             stream.last_event = event  # an event's candidates are drawn once; what fails waits for the next
-            random = np.random.default_rng([stream.seed, stream.index, event])
+            random = np.random.default_rng([stream.seed & (2**64 - 1), stream.index, event])
             radii = stream.candidate_radii(event, random)
             if not len(radii):
                 continue
@@ -261,6 +272,7 @@ class ParticleStreams(kinds.StateComponent):
             stream.load_state_dict(groups[stream.group])
         self.next_id = int(state["next_id"])
         self.energy_in = float(state["energy_in"])
+        self._next_due_step = 0
 
 
 def stream_radius_range(scene):
