@@ -395,6 +395,11 @@ def _validate_as_run(scene, base_dir) -> int:
     return len(inserted.radii)
 
 
+def _stream_text(insert) -> str:
+    """'stream of 400/s' or 'stream of 0.5 kg/s' (docs/streams.md)."""
+    return f"stream of {insert.rate:g}/s" if insert.rate is not None else f"stream of {insert.mass_rate:g} kg/s"
+
+
 def _report(path, scene, base_dir, placed) -> tuple:
     from pdemfem.scene import derived
     from pdemfem.scene.loader import scene_hash
@@ -403,7 +408,8 @@ def _report(path, scene, base_dir, placed) -> tuple:
     total = derived.particle_count(scene)
     lines = [f"scene: {path} (physics hash {scene_hash(scene)[:12]})"]
     groups = ", ".join(
-        f"{group.name}: {count} {group.material}, r = {_radius_text(derived.group_radius_range(group))}"
+        f"{group.name}: {_stream_text(group.insert) if group.insert.kind == 'stream' else count} {group.material}, "
+        f"r = {_radius_text(derived.group_radius_range(group))}"
         for group, count in zip(scene.particles, counts)
     )
     lines.append(f"particles: {total}" + (f" ({groups})" if groups else "")
