@@ -15,7 +15,8 @@ statement of physics (docs/stability.md lists them):
 3. Runaway: a particle moving more than the smallest radius in one step misses its contacts
    (`Simulation.step` stops at once on the displacement the step computes anyway).
 4. Energy created: the bookkeeping total (kinetic + rotational + potential + elastic +
-   dissipated - wall work + the solids' kinetic, strain and load potential) is conserved
+   dissipated - wall work + the solids' kinetic, strain and load potential - the stream energy
+   of inserted minus removed particles) is conserved
    by the equations; a stable explicit step errs by a fraction of the energy that moves.
    The run stops when the total has grown by more than all the energy the scene has had
    available since the baseline: its kinetic, rotational, elastic and solid energies at
