@@ -384,12 +384,14 @@ def _validate_as_run(scene, base_dir) -> int:
     files, and the checks that relate them (coordinates, domain.box, periodic lengths).
     Returns the number of particles placed."""
     from pdemfem.particles.insert import insert_particles
+    from pdemfem.particles.stream import validate_streams
     from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
     from pdemfem.scene.loader import resolve_path
     from pdemfem.walls.factory import build_contributor_walls
 
     validate_scene_coordinates(scene)
     inserted = insert_particles(scene)
+    validate_streams(scene)
     walls = build_contributor_walls(scene.walls, list(scene.materials), lambda file: resolve_path(base_dir, file))
     validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in walls if hasattr(wall, "vertices")])
     return len(inserted.radii)

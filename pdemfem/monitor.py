@@ -70,6 +70,11 @@ class DivergenceMonitor:
         radii = simulation.particle_system.state.radii[:simulation.particle_system.state.owned_count]
         local = float(radii.min()) if len(radii) else math.inf
         self.smallest_radius = simulation.comm.allreduce(local, op=_min_op())
+        from pdemfem.particles.stream import stream_radius_range
+
+        streamed = stream_radius_range(scene)  # the particles streams insert later
+        if streamed is not None:
+            self.smallest_radius = min(self.smallest_radius, streamed[0])
         self.wall_speed = max((derived._wall_speed(wall) for wall in scene.walls), default=0.0)
         self.energy_check_skipped = self._energy_check_skipped()
         # A particle that moves more than the smallest radius in one step passes through others

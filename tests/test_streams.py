@@ -225,3 +225,29 @@ def test_region_thinner_than_a_particle_is_refused(tmp_path):
     with pytest.raises(SceneError) as error:
         Simulation.from_dict(_scene(insert=insert), output_dir=tmp_path)
     assert "particles[0].insert.region.box" in str(error.value) and "thinner" in str(error.value)
+
+
+def test_check_reports_the_stream_and_its_region_errors(tmp_path, capsys):
+    from pdemfem import cli
+
+    example = Path(__file__).resolve().parent.parent / "examples" / "pour.yaml"
+    assert cli.main(["check", str(example)]) == 0
+    out = capsys.readouterr().out
+    assert "gravel: stream of 400/s" in out and "no particles" not in out
+    import yaml
+
+    scene = _scene(insert={**STREAM, "rate": 10, "region": {"box": [[0, 0, 0.05], [0.01, 0.01, 0.0515]]}})
+    path = tmp_path / "thin.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    assert cli.main(["check", str(path)]) == 2
+    assert "particles[0].insert.region.box" in capsys.readouterr().err
+
+
+def test_run_monitor_knows_the_streamed_radii(tmp_path):
+    """A scene that starts empty still gets the runaway and tunnelling limits of its streamed particles."""
+    from pdemfem.monitor import DivergenceMonitor
+
+    sim = Simulation.from_dict(falling_stream(tmp_path), output_dir=tmp_path)
+    monitor = DivergenceMonitor(sim)
+    assert monitor.smallest_radius == 0.0008
+    assert sim.runaway_displacement == 0.0008 + 0.5 * sim.particle_system.skin

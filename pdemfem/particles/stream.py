@@ -135,6 +135,7 @@ class ParticleStreams(kinds.StateComponent):
     @classmethod
     def from_scene(cls, scene, material_names, next_id: int, dt: float):
         """The streams of `scene` (None when it has none); SceneError for a region that cannot work."""
+        validate_streams(scene)
         streams = []
         end = scene.time.end
         for index, group in enumerate(scene.particles):
@@ -144,10 +145,6 @@ class ParticleStreams(kinds.StateComponent):
             key = f"particles[{index}].insert"
             smallest, largest = group_radius_range(group)
             lower, upper = (np.array(corner, dtype=float) for corner in insert.region.box)
-            if np.any(upper - lower < 2.0 * largest):
-                raise SceneError(f"{key}.region.box", f"the region is thinner than the largest particle diameter "
-                                                      f"{2 * largest:g} m", "enlarge region.box")
-            _check_inside_domain(scene, key, lower, upper)
             stop = insert.stop if insert.stop is not None else math.inf
             velocity = np.array(insert.velocity, dtype=float)
             interval = insert.interval or default_interval(lower, upper, velocity, scene.gravity,
@@ -304,14 +301,25 @@ def default_interval(lower, upper, velocity, gravity, duration: float, dt: float
     return max(time, dt)
 
 
-def _check_inside_domain(scene, key, lower, upper) -> None:
-    if scene.domain.box is None:
-        return
-    low, high = (np.asarray(corner, dtype=float) for corner in scene.domain.box)
-    bounded = np.array(["xyz"[axis] not in scene.domain.periodic for axis in range(3)])
-    if np.any(((lower < low) | (upper > high)) & bounded):
-        raise SceneError(f"{key}.region.box", "the region reaches outside domain.box: particles inserted there "
-                                              "would be removed as lost", "move the region inside domain.box")
+def validate_streams(scene) -> None:
+    """SceneError for a stream region that cannot work: thinner than a particle, or reaching
+    outside domain.box (`pdemfem check` and `run`)."""
+    for index, group in enumerate(scene.particles):
+        if group.insert.kind != "stream":
+            continue
+        key = f"particles[{index}].insert.region.box"
+        lower, upper = (np.array(corner, dtype=float) for corner in group.insert.region.box)
+        largest = group_radius_range(group)[1]
+        if np.any(upper - lower < 2.0 * largest):
+            raise SceneError(key, f"the region is thinner than the largest particle diameter {2 * largest:g} m",
+                             "enlarge region.box")
+        if scene.domain.box is None:
+            continue
+        low, high = (np.asarray(corner, dtype=float) for corner in scene.domain.box)
+        bounded = np.array(["xyz"[axis] not in scene.domain.periodic for axis in range(3)])
+        if np.any(((lower < low) | (upper > high)) & bounded):
+            raise SceneError(key, "the region reaches outside domain.box: particles inserted there would be removed "
+                                  "as lost", "move the region inside domain.box")
 
 
 # ---------------------------------------------------------------- walls
