@@ -95,9 +95,9 @@ def test_outlets_count_what_they_take(tmp_path):
     assert history["particles_out"][-1] == 20
 
 
-@pytest.mark.parametrize("kind", ["plane", "mesh"])
+@pytest.mark.parametrize("kind", ["plane", "mesh", "cylinder"])
 def test_candidates_touching_a_wall_are_not_inserted(kind, tmp_path):
-    """A region cut by a floor at z = 0: particles appear only where they clear it."""
+    """A region cut by a floor at z = 0 (or a drum's side): particles appear only where they clear it."""
     scene = falling_stream(tmp_path, rate=4000.0, stop=0.01, interval=0.01, end=1e-4,
                            region=[[0.0, 0.0, -0.003], [0.03, 0.03, 0.004]])
     scene["gravity"] = [0.0, 0.0, 0.0]
@@ -105,17 +105,28 @@ def test_candidates_touching_a_wall_are_not_inserted(kind, tmp_path):
     if kind == "plane":
         scene["walls"] = [{"name": "floor", "kind": "plane", "material": "glass", "point": [0, 0, 0],
                            "normal": [0, 0, 1]}]
-    else:
+    elif kind == "mesh":
         from test_conveyor import _write_square_stl
 
         _write_square_stl(tmp_path / "floor.stl", 0.1)
         scene["walls"] = [{"name": "floor", "kind": "mesh", "material": "glass", "file": "floor.stl"}]
+    else:  # a drum of radius 14 mm about the region's vertical centre line: the box's corners stick out
+        scene["walls"] = [{"name": "drum", "kind": "cylinder", "material": "glass", "radius": 0.014,
+                           "axis": {"point": [0.015, 0.015, 0.0], "direction": [0, 0, 1]}}]
     scene["outlets"] = []
     sim = Simulation.from_dict(scene, base_dir=tmp_path, output_dir=tmp_path)
     sim.step(1)
     p = sim.particles
-    assert len(p.ids) > 5  # the event drew 40 candidates; those clear of the floor stayed
+    assert len(p.ids) > 5  # the event drew 40 candidates; those clear of the wall stayed
+    if kind == "cylinder":
+        axis_distance = np.hypot(p.positions[:, 0] - 0.015, p.positions[:, 1] - 0.015)
+        assert np.all(axis_distance <= 0.014 - p.radii) and np.any(axis_distance > 0.014 - 0.004)
+        return
     assert np.all(np.abs(p.positions[:, 2]) >= p.radii)  # none touches the floor (from either side)
+    if kind == "mesh":
+        # The new rows of the wall's history field got its fill (-1: no patch), not zero (patch 0).
+        state = sim.particle_system.state
+        assert np.all(state.fields["wall:floor:patch"][:state.owned_count] == -1)
 
 
 def _gather_exact(simulation):
@@ -251,3 +262,29 @@ def test_run_monitor_knows_the_streamed_radii(tmp_path):
     monitor = DivergenceMonitor(sim)
     assert monitor.smallest_radius == 0.0008
     assert sim.runaway_displacement == 0.0008 + 0.5 * sim.particle_system.skin
+
+
+def test_region_outside_the_domain_is_refused(tmp_path):
+    scene = _scene(insert={**STREAM, "rate": 10})
+    scene["domain"] = {"box": [[-1, -1, -1], [1, 1, 0.005]]}
+    with pytest.raises(SceneError) as error:
+        Simulation.from_dict(scene, output_dir=tmp_path)
+    assert "particles[0].insert.region.box" in str(error.value) and "domain.box" in str(error.value)
+
+
+def test_default_interval_is_the_time_to_leave_the_region():
+    from pdemfem.particles.stream import default_interval
+
+    lower, upper = np.zeros(3), np.array([0.01, 0.01, 0.004])
+    gravity = (0.0, 0.0, -9.81)
+    # From rest, falling the region's height L under g: t = sqrt(2 L / g).
+    assert math.isclose(default_interval(lower, upper, (0, 0, 0), gravity, 1.0, 1e-6), math.sqrt(2 * 0.004 / 9.81),
+                        rel_tol=1e-12)
+    # Thrown down at v: L = v t + g t^2 / 2.
+    t = default_interval(lower, upper, (0, 0, -0.2), gravity, 1.0, 1e-6)
+    assert math.isclose(0.2 * t + 0.5 * 9.81 * t * t, 0.004, rel_tol=1e-12)
+    # Sideways without gravity: L / v along x.
+    assert math.isclose(default_interval(lower, upper, (0.5, 0, 0), (0, 0, 0), 1.0, 1e-6), 0.01 / 0.5, rel_tol=1e-12)
+    # No motion at all: 1 % of the duration; never below dt.
+    assert default_interval(lower, upper, (0, 0, 0), (0, 0, 0), 2.0, 1e-6) == 0.02
+    assert default_interval(lower, upper, (0, 0, 0), (0, 0, 0), 2.0, 0.5) == 0.5
