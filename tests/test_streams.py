@@ -288,3 +288,14 @@ def test_default_interval_is_the_time_to_leave_the_region():
     # No motion at all: 1 % of the duration; never below dt.
     assert default_interval(lower, upper, (0, 0, 0), (0, 0, 0), 2.0, 1e-6) == 0.02
     assert default_interval(lower, upper, (0, 0, 0), (0, 0, 0), 2.0, 0.5) == 0.5
+
+
+@pytest.mark.mpi
+def test_insertion_keeps_the_forces_of_particles_that_change_rank(tmp_path):
+    """Every insertion rebuild re-partitions (rebalance threshold 1): particles migrate, and the last
+    step's forces and torques of every particle are the same after the insertion as before, bit for bit
+    (stream_forces_case.py exits 1 otherwise)."""
+    completed = run_under_mpi(2, "stream_forces_case.py", tmp_path / "out")
+    words = completed.stdout.split()
+    migrated, compared = int(words[words.index("migrated") + 1]), int(words[words.index("compared") + 1])
+    assert migrated > 0 and compared > 0, completed.stdout
