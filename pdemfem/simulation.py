@@ -328,13 +328,13 @@ class Simulation:
 
     def stream_totals(self) -> dict:
         """Particles and mass [kg] the streams inserted and the outlets removed so far (every rank)."""
-        streams, outlets = self.streams, self.outlets
-        totals = {"particles_in": streams.inserted if streams is not None else 0,
-                  "mass_in": streams.mass_in if streams is not None else 0.0,
-                  "particles_out": outlets.count_out if outlets is not None else 0,
-                  "mass_out": outlets.mass_out if outlets is not None else 0.0}
-        for name, mass in zip(outlets.names if outlets is not None else [], outlets.masses if outlets is not None else []):
-            totals[f"mass_out_{name}"] = float(mass)
+        totals = {"particles_in": 0, "mass_in": 0.0, "particles_out": 0, "mass_out": 0.0}
+        if self.streams is not None:
+            totals.update(particles_in=self.streams.inserted, mass_in=self.streams.mass_in)
+        if self.outlets is not None:
+            totals.update(particles_out=self.outlets.count_out, mass_out=self.outlets.mass_out)
+            totals.update({f"mass_out_{name}": float(mass) for name, mass in zip(self.outlets.names,
+                                                                                self.outlets.masses)})
         return totals
 
     def _support_groups(self) -> list:

@@ -17,6 +17,9 @@ as *contributors*: objects with
   reduce(comm)                           sum the body's rank-local totals (called when comm.size > 1)
 Their per-particle contact history lives in state.fields (ParticleState.add_field),
 so it is reordered and migrated with the particles.
+
+Particles come and go at list rebuilds: streams append new ones (add_particles), and the
+particles beyond the domain box or in an outlet (pdemfem.particles.outlet) are removed.
 """
 from __future__ import annotations
 
