@@ -160,6 +160,18 @@ def test_restart_mid_stream_is_bit_identical(tmp_path):
 
 
 @pytest.mark.mpi
+def test_restart_mid_stream_on_two_ranks_is_bit_identical(tmp_path):
+    out = tmp_path / "two"
+    run_under_mpi(2, "stream_restart_case.py", out, tmp_path / "full.npz")
+    middle = sorted((out / "checkpoints").glob("checkpoint_*.h5"))[1]
+    run_under_mpi(2, "stream_restart_case.py", out, tmp_path / "continued.npz", "--restart", middle)
+    full, continued = dict(np.load(tmp_path / "full.npz")), dict(np.load(tmp_path / "continued.npz"))
+    assert sorted(full) == sorted(continued)
+    for key in full:
+        assert np.array_equal(full[key], continued[key]), key
+
+
+@pytest.mark.mpi
 def test_same_particles_on_one_two_and_three_ranks(tmp_path):
     results = []
     for ranks in (1, 2, 3):
