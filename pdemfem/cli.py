@@ -314,7 +314,8 @@ def _command_run(arguments, comm) -> int:
     if not arguments.quiet:
         count = derived.particle_count(scene)
         dt = getattr(simulation, "dt", None) or derived.time_step(scene)
-        _say(comm, f"pdemfem run {arguments.scene}: {count} particles on {comm.size} rank(s), "
+        streams = " (+ streams)" if any(group.insert.kind == "stream" for group in scene.particles) else ""
+        _say(comm, f"pdemfem run {arguments.scene}: {count} particles{streams} on {comm.size} rank(s), "
                    f"dt = {dt:.3g} s, end = {scene.time.end:g} s, output: {output_dir}")
     # The warnings of `pdemfem check`, before the first step (stderr, also with --quiet).
     solid_step = simulation.dt if simulation.solids and not scene.particles else None
