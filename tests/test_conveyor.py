@@ -83,6 +83,8 @@ def test_sphere_on_a_belt_ends_rolling_at_two_sevenths_of_the_belt_speed(kind, t
     # in which friction switches from the Coulomb cap to the spring is resolved to O(dt/t*) = 5e-4;
     # the normal force is m g exactly (set down at the static overlap).  Tolerance 2 (1.4 delta/R + dt/t*).
     tolerance = 2.0 * (1.4 * delta / RADIUS + dt / t_star)
+    print(f"{kind} belt: t_roll/t* - 1 = {t_roll / t_star - 1.0:.2e}, v/(2V/7) - 1 = "
+          f"{v_roll / (2.0 / 7.0 * BELT) - 1.0:.2e} (tolerance {tolerance:.2e})")
     assert abs(t_roll / t_star - 1.0) < tolerance, (t_roll, t_star)
     assert abs(v_roll / (2.0 / 7.0 * BELT) - 1.0) < tolerance, (v_roll, 2.0 / 7.0 * BELT)
     # Then it keeps rolling at 2/7 V (the spring holds: no stick-slip) with its contact point at the belt speed.

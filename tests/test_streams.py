@@ -60,6 +60,8 @@ def test_mass_rate_inserts_mass_rate_times_time_to_one_particle(tmp_path):
     sim.step(_steps(sim))
     largest_mass = 4.0 / 3.0 * math.pi * 0.0012**3 * 2500.0
     mass_in = sim.stream_totals()["mass_in"]
+    print(f"mass_in - mass_rate * stop = {mass_in - mass_rate * stop:.3g} kg, half the largest particle "
+          f"{0.5 * largest_mass:.3g} kg")
     # Each event adds particles while the total stays within half a particle of its target.
     assert abs(mass_in - mass_rate * stop) <= 0.5 * largest_mass, (mass_in, mass_rate * stop)
     assert sim.streams.inserted > 50  # a real size distribution, not a handful of particles
