@@ -314,7 +314,8 @@ def _command_run(arguments, comm) -> int:
     if not arguments.quiet:
         count = derived.particle_count(scene)
         dt = getattr(simulation, "dt", None) or derived.time_step(scene)
-        _say(comm, f"pdemfem run {arguments.scene}: {count} particles on {comm.size} rank(s), "
+        streams = " (+ streams)" if any(group.insert.kind == "stream" for group in scene.particles) else ""
+        _say(comm, f"pdemfem run {arguments.scene}: {count} particles{streams} on {comm.size} rank(s), "
                    f"dt = {dt:.3g} s, end = {scene.time.end:g} s, output: {output_dir}")
     # The warnings of `pdemfem check`, before the first step (stderr, also with --quiet).
     solid_step = simulation.dt if simulation.solids and not scene.particles else None
@@ -384,15 +385,22 @@ def _validate_as_run(scene, base_dir) -> int:
     files, and the checks that relate them (coordinates, domain.box, periodic lengths).
     Returns the number of particles placed."""
     from pdemfem.particles.insert import insert_particles
+    from pdemfem.particles.stream import validate_streams
     from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
     from pdemfem.scene.loader import resolve_path
     from pdemfem.walls.factory import build_contributor_walls
 
     validate_scene_coordinates(scene)
     inserted = insert_particles(scene)
+    validate_streams(scene)
     walls = build_contributor_walls(scene.walls, list(scene.materials), lambda file: resolve_path(base_dir, file))
     validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in walls if hasattr(wall, "vertices")])
     return len(inserted.radii)
+
+
+def _stream_text(insert) -> str:
+    """'stream of 400/s' or 'stream of 0.5 kg/s' (docs/streams.md)."""
+    return f"stream of {insert.rate:g}/s" if insert.rate is not None else f"stream of {insert.mass_rate:g} kg/s"
 
 
 def _report(path, scene, base_dir, placed) -> tuple:
@@ -403,7 +411,8 @@ def _report(path, scene, base_dir, placed) -> tuple:
     total = derived.particle_count(scene)
     lines = [f"scene: {path} (physics hash {scene_hash(scene)[:12]})"]
     groups = ", ".join(
-        f"{group.name}: {count} {group.material}, r = {_radius_text(derived.group_radius_range(group))}"
+        f"{group.name}: {_stream_text(group.insert) if group.insert.kind == 'stream' else count} {group.material}, "
+        f"r = {_radius_text(derived.group_radius_range(group))}"
         for group, count in zip(scene.particles, counts)
     )
     lines.append(f"particles: {total}" + (f" ({groups})" if groups else "")

@@ -15,7 +15,8 @@ statement of physics (docs/stability.md lists them):
 3. Runaway: a particle moving more than the smallest radius in one step misses its contacts
    (`Simulation.step` stops at once on the displacement the step computes anyway).
 4. Energy created: the bookkeeping total (kinetic + rotational + potential + elastic +
-   dissipated - wall work + the solids' kinetic, strain and load potential) is conserved
+   dissipated - wall work + the solids' kinetic, strain and load potential - the stream energy
+   of inserted minus removed particles) is conserved
    by the equations; a stable explicit step errs by a fraction of the energy that moves.
    The run stops when the total has grown by more than all the energy the scene has had
    available since the baseline: its kinetic, rotational, elastic and solid energies at
@@ -58,7 +59,8 @@ def total_energy(energies: dict) -> float:
     return (energies["kinetic_energy"] + energies["rotational_energy"] + energies["potential_energy"]
             + energies["elastic_energy"] + energies["dissipated_energy"] - energies["wall_work"]
             + energies.get("solid_kinetic_energy", 0.0) + energies.get("solid_strain_energy", 0.0)
-            + energies.get("solid_load_potential", 0.0) - energies.get("thermoelastic_work", 0.0))
+            + energies.get("solid_load_potential", 0.0) - energies.get("thermoelastic_work", 0.0)
+            - energies.get("stream_energy", 0.0))
 
 
 # Heat content (m c T, relative to 0 K) is orders of magnitude above the mechanical energies and
@@ -81,6 +83,11 @@ class DivergenceMonitor:
         radii = simulation.particle_system.state.radii[:simulation.particle_system.state.owned_count]
         local = float(radii.min()) if len(radii) else math.inf
         self.smallest_radius = simulation.comm.allreduce(local, op=_min_op())
+        from pdemfem.particles.stream import stream_radius_range
+
+        streamed = stream_radius_range(scene)  # the particles streams insert later
+        if streamed is not None:
+            self.smallest_radius = min(self.smallest_radius, streamed[0])
         self.wall_speed = max((derived._wall_speed(wall) for wall in scene.walls), default=0.0)
         self.energy_check_skipped = self._energy_check_skipped()
         # A particle that moves more than the smallest radius in one step passes through others
@@ -125,6 +132,7 @@ class DivergenceMonitor:
             "potential": _potential(energies),
             "wall_work": energies["wall_work"],
             "thermoelastic_work": energies.get("thermoelastic_work", 0.0),
+            "stream_energy": energies.get("stream_energy", 0.0),
             "lost": system.lost_particles,
             "step": self.sim.step_count,
             "magnitude": _mechanical_magnitude(energies),
@@ -188,7 +196,8 @@ class DivergenceMonitor:
         self.lowest_potential = min(self.lowest_potential, potential)
         available = (baseline["stored"] + (baseline["potential"] - self.lowest_potential)
                      + abs(energies["wall_work"] - baseline["wall_work"])
-                     + abs(energies.get("thermoelastic_work", 0.0) - baseline["thermoelastic_work"]))
+                     + abs(energies.get("thermoelastic_work", 0.0) - baseline["thermoelastic_work"])
+                     + abs(energies.get("stream_energy", 0.0) - baseline["stream_energy"]))
         created = total_energy(energies) - baseline["total"]
         floor = ROUND_OFF * max(baseline["magnitude"], _mechanical_magnitude(energies))
         if created > available + floor:

@@ -26,6 +26,8 @@ from pdemfem.monitor import DivergenceMonitor
 from pdemfem.parallel.api_safety import collective_errors, private_communicators
 from pdemfem.particles.heat import material_heat_capacities
 from pdemfem.particles.insert import insert_particles
+from pdemfem.particles.outlet import Outlets
+from pdemfem.particles.stream import ParticleStreams, stream_radius_range
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
@@ -114,8 +116,12 @@ class Simulation:
         scene = self.scene
         validate_scene_coordinates(scene)  # before the insertion bins them (as `pdemfem check`)
         inserted = insert_particles(scene)
+        # Streams insert particles later (pdemfem.particles.stream): their radii count for the skin and cutoffs.
+        streamed = stream_radius_range(scene)
+        radius_bounds = ([float(inserted.radii.min()), float(inserted.radii.max())] if len(inserted.radii) else []) \
+            + (list(streamed) if streamed else [])
         tables = build_contact_tables(scene, characteristic_speed=derived.expected_impact_speed(scene),
-                                      largest_radius=float(inserted.radii.max()) if len(inserted.radii) else 0.0)
+                                      largest_radius=max(radius_bounds, default=0.0))
         group_material = np.array([tables.material_names.index(group.material) for group in scene.particles],
                                   dtype=np.int32)
         group_density = np.array([scene.materials[group.material].density for group in scene.particles])
@@ -155,12 +161,15 @@ class Simulation:
         self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]
         validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in self.contributor_walls
                                             if hasattr(wall, "vertices")])  # the checks `pdemfem check` makes
-        smallest_radius = float(inserted.radii.min()) if count else 1.0
+        smallest_radius = min(radius_bounds, default=1.0)
         skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
+        self.streams = ParticleStreams.from_scene(scene, tables.material_names, next_id=total, dt=self.dt)
+        self.outlets = Outlets.from_scene(scene)
         return ParticleSystem(state, walls, tables, scene.gravity, self.dt, skin, self.comm,
                               contributors=self.contributor_walls,
                               domain_box=scene.domain.box, periodic_axes=scene.domain.periodic,
                               rebalance_threshold=scene.parallel.rebalance_threshold,
+                              largest_radius=max(radius_bounds, default=0.0), outlets=self.outlets,
                               heat_capacities=material_heat_capacities(scene, tables.material_names) if heat else None)
 
     def _build_solids(self) -> dict:
@@ -192,6 +201,8 @@ class Simulation:
         than the monitor's limit since the list build; the check that follows stops the run)."""
         system = self.particle_system
         for _ in range(int(count)):
+            if self.streams is not None:
+                self.streams.insert_due(self)  # the insertion events due at this step's start
             system.step()
             if self.solids:
                 self.coupling.after_particle_step()
@@ -303,6 +314,9 @@ class Simulation:
         for solid, group in self._support_groups():
             columns += [f"reaction_{solid}_{group}_x", f"reaction_{solid}_{group}_y", f"reaction_{solid}_{group}_z"]
         columns += [f"max_displacement_{name}" for name in self.solids]
+        if self.streams is not None or self.outlets is not None:
+            columns += ["particles_in", "mass_in", "particles_out", "mass_out", "stream_energy"]
+            columns += [f"mass_out_{name}" for name in (self.outlets.names if self.outlets is not None else [])]
         return columns
 
     def history_row(self) -> dict:
@@ -333,7 +347,20 @@ class Simulation:
             displacements = solid.displacements
             local = float(np.sqrt((displacements ** 2).sum(axis=1)).max()) if len(displacements) else 0.0
             row[f"max_displacement_{name}"] = self.comm.allreduce(local, op=MPI.MAX)
+        if self.streams is not None or self.outlets is not None:
+            row.update(self.stream_totals())
         return row
+
+    def stream_totals(self) -> dict:
+        """Particles and mass [kg] the streams inserted and the outlets removed so far (every rank)."""
+        totals = {"particles_in": 0, "mass_in": 0.0, "particles_out": 0, "mass_out": 0.0}
+        if self.streams is not None:
+            totals.update(particles_in=self.streams.inserted, mass_in=self.streams.mass_in)
+        if self.outlets is not None:
+            totals.update(particles_out=self.outlets.count_out, mass_out=self.outlets.mass_out)
+            totals.update({f"mass_out_{name}": float(mass) for name, mass in zip(self.outlets.names,
+                                                                                self.outlets.masses)})
+        return totals
 
     def _support_groups(self) -> list:
         """(solid, group) of every fixed or prescribed group: each gets reaction_<solid>_<group>_x/y/z columns."""
@@ -407,6 +434,10 @@ class Simulation:
             energies["particle_thermal_energy"] = particle_heat
             energies["thermal_energy"] = particle_heat + sum(
                 solid.thermal_energy() for solid in self.solids.values() if getattr(solid, "heat", None) is not None)
+        if self.streams is not None or self.outlets is not None:
+            # Energy the inserted particles brought in minus what the outlets took out (docs/streams.md).
+            energies["stream_energy"] = ((self.streams.energy_in if self.streams is not None else 0.0)
+                                         - (self.outlets.energy_out if self.outlets is not None else 0.0))
         return energies
 
     def heat_given(self) -> dict:

@@ -5,7 +5,8 @@ land, collide or tumble in it; a few seconds each) and its output (a temporary f
 series).  The history must show:
 
 * no particle lost and none created (`particles` constant, `lost_particles` 0), unless the scene has
-  a `domain.box` that grains may leave (then every loss is counted: particles + lost = inserted);
+  a `domain.box` that grains may leave (then every loss is counted: particles + lost = inserted), or
+  streams and outlets (then particles = inserted + particles_in - particles_out);
 * the energy balance closed: the bookkeeping total (kinetic + rotational + potential + elastic +
   dissipated - wall work + the solids' kinetic, strain and load potential) stays within
   ENERGY_TOLERANCE of the energy that changed form in the window;
@@ -62,10 +63,12 @@ def test_example_runs_a_window_with_its_particles_and_energy_accounted_for(path,
     history = read_history(tmp_path / "out" / "history.csv")
     assert history["step"][-1] == simulation.step_count > 0
 
+    # Streams add particles and outlets take them (docs/streams.md): both are counted.
+    streamed = history["particles_in"] - history["particles_out"] if "particles_in" in history else 0
     if data.get("domain", {}).get("box") is None:
-        assert np.all(history["particles"] == inserted) and np.all(history["lost_particles"] == 0)
+        assert np.all(history["particles"] == inserted + streamed) and np.all(history["lost_particles"] == 0)
     else:
-        assert np.all(history["particles"] + history["lost_particles"] == inserted)
+        assert np.all(history["particles"] + history["lost_particles"] == inserted + streamed)
 
     rows = [{name: history[name][index] for name in history} for index in range(len(history["time"]))]
     totals = np.array([total_energy(row) for row in rows])

@@ -207,6 +207,8 @@ class SimulationIO:
         components["coupling"] = sim.coupling
         components["plane_walls"] = sim.particle_system.walls
         components.update({f"wall:{wall.name}": wall for wall in sim.contributor_walls})
+        components.update({name: component for name, component in (("streams", sim.streams), ("outlets", sim.outlets))
+                           if component is not None})
         components["particles"] = sim.particle_system
         return components
 
@@ -222,9 +224,9 @@ class SimulationIO:
             "step": int(sim.step_count), "time": float(sim.time), "dt": float(sim.dt),
             "scene_hash": scene_hash(sim.scene),
             "scene_physics": scene_physics(sim.scene),  # so a hash mismatch can name the changed keys
-            "rng_state": {"note": "all particles are inserted at t = 0 from the scene's seeds; no random "
-                                  "numbers are drawn later"},
-            "insertion": {"complete": True, "inserted": int(sim.inserted_count)},
+            "rng_state": {"note": "particles are inserted from the scene's seeds (a stream's event from its seed "
+                                  "and the event index): no random state is carried"},
+            "insertion": {"complete": sim.streams is None, "inserted": int(sim.inserted_count)},
             "solids": list(sim.solids),
         }
         directory = checkpoint_directory(sim)

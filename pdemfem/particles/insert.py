@@ -188,6 +188,8 @@ def insert_particles(scene) -> InsertedParticles:
     for index, group in enumerate(scene.particles):
         where = f"particles[{index}].insert"
         insert = group.insert
+        if insert.kind == "stream":  # inserted over time (pdemfem.particles.stream)
+            continue
         rng = np.random.default_rng(insert.seed)
         if insert.kind == "list":
             group_positions = np.array(insert.positions, dtype=float).reshape(-1, 3)

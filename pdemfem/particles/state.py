@@ -37,6 +37,8 @@ class FieldSpec:
     ghost_step: bool = False
     checkpoint: bool = True
     periodic_shift: bool = False
+    # The value of a new particle's row (pdemfem.particles.stream inserts particles mid-run).
+    fill: float = 0
 
     def flags(self) -> dict:
         flags = asdict(self)
@@ -127,7 +129,8 @@ class ParticleState(kinds.StateComponent):
         if name in self.registry:
             raise ValueError(f"per-particle field '{name}' registered twice")
         self._register(FieldSpec(name, migrate=migrate, ghost_rebuild=ghost_rebuild, ghost_step=ghost_step,
-                                 checkpoint=checkpoint, periodic_shift=periodic_shift), np.dtype(dtype))
+                                 checkpoint=checkpoint, periodic_shift=periodic_shift,
+                                 fill=fill.item() if hasattr(fill, "item") else fill), np.dtype(dtype))
         self.fields[name] = np.full((self.count, *tail_shape), fill, dtype=dtype)
         return self.fields[name]
 
@@ -231,6 +234,16 @@ class ParticleState(kinds.StateComponent):
                     np.concatenate([values, np.zeros((count, *values.shape[1:]), dtype=values.dtype)])))
         if not as_ghosts:
             self.owned_count += count
+
+    def append_particles(self, new: "ParticleState") -> None:
+        """Append the particles of `new` (built by the constructor, so its core fields are complete) as
+        owned rows (ghosts must have been dropped first); every field added with add_field gets its fill."""
+        assert self.ghost_count == 0, "append owned particles only"
+        for name, values in self._all_arrays():
+            rows = (new.array(name) if name in new.registry
+                    else np.full((new.count, *values.shape[1:]), self.registry[name].fill, dtype=values.dtype))
+            self._set(name, np.ascontiguousarray(np.concatenate([values, rows.astype(values.dtype, copy=False)])))
+        self.owned_count += new.count
 
     def nbytes(self) -> int:
         return sum(values.nbytes for _, values in self._all_arrays())

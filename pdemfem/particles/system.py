@@ -19,6 +19,9 @@ as *contributors*: objects with
                                          the last add_forces (read after it)
 Their per-particle contact history lives in state.fields (ParticleState.add_field),
 so it is reordered and migrated with the particles.
+
+Particles come and go at list rebuilds: streams append new ones (add_particles), and the
+particles beyond the domain box or in an outlet (pdemfem.particles.outlet) are removed.
 """
 from __future__ import annotations
 
@@ -48,7 +51,8 @@ REORDER_FRACTION = 0.1
 
 class ParticleSystem(kinds.StateComponent):
     def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm, contributors=(),
-                 domain_box=None, periodic_axes=(), rebalance_threshold: float = 1.2, heat_capacities=None):
+                 domain_box=None, periodic_axes=(), rebalance_threshold: float = 1.2, largest_radius: float = 0.0,
+                 outlets=None, heat_capacities=None):
         """heat_capacities: c [J/(kg K)] per contact-table row, needed when the tables' composition has
         heat on (pdemfem.particles.heat); the state then carries temperatures."""
         self.state = state
@@ -91,8 +95,11 @@ class ParticleSystem(kinds.StateComponent):
         self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift
         self.fastest_speed = 0.0  # largest particle speed at the last energies() call
         self.rebalances = 0
-        largest_radius = float(state.radii.max()) if state.count else 0.0
+        # `largest_radius`: of the particles inserted later (streams), which the ghost cutoff must cover too.
+        largest_radius = max(float(state.radii.max()) if state.count else 0.0, float(largest_radius))
         self.largest_radius = comm.allreduce(largest_radius, op=MPI.MAX)
+        # Sinks (pdemfem.particles.outlet) that take particles at list rebuilds, as the domain box does.
+        self.outlets = outlets
         # A ghost is needed when it can touch (or, cohesive, still hold on to) an owned particle before the
         # next rebuild.
         self.ghost_cutoff = 2.0 * self.largest_radius + self.skin + tables.cohesion_reach
@@ -218,6 +225,23 @@ class ParticleSystem(kinds.StateComponent):
     def canonicalize(self) -> None:
         self.canonical_rebuild()
 
+    def add_particles(self, new_state) -> None:
+        """Collective: append `new_state`'s particles (new ids, touching nothing; this rank's share) as
+        owned rows and rebuild the list.  The last step's loads (checkpointed fields that do not
+        migrate: forces, torques) travel with their particles, as in canonical_rebuild: the next
+        step's first half kick needs them; the new particles start with none."""
+        state = self.state
+        records = self.neighbors.contact_records(state.ids, state.owned_count)  # while the ghost rows are there
+        state.drop_ghosts()
+        state.append_particles(new_state)
+        carried = [name for name in state.field_names("checkpoint") if not state.registry[name].migrate]
+        for name in carried:
+            values = state.array(name)
+            state.add_field(f"carry:{name}", values.shape[1:], values.dtype, checkpoint=False)[:] = values
+        self._rebuild(records=records)
+        for name in carried:
+            state._set(name, state.remove_field(f"carry:{name}"))
+
     def _rebuild(self, force_rebalance: bool = False, records=None, canonical: bool = False) -> None:
         """Migrate, (re)balance, sort, exchange ghosts and rebuild the list, keeping contact history."""
         state = self.state
@@ -302,9 +326,12 @@ class ParticleSystem(kinds.StateComponent):
             self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
         lost, nonfinite = int(counts[0]), int(counts[1])
         if lost:
-            state.keep(np.flatnonzero(~outside))
             self.lost_particles += lost
             self.nonfinite_particles += nonfinite
+        if self.outlets is not None:  # particles an outlet takes are counted there (collective)
+            outside |= self.outlets.take(state, ~outside, self.gravity, self.comm)
+        if np.any(outside):
+            state.keep(np.flatnonzero(~outside))
         return ~outside
 
     def _sort_owned(self) -> None:

@@ -86,11 +86,12 @@ def group_radius_range(group: ParticleGroupConfig) -> Tuple[float, float]:
 
 
 def group_counts(scene: Scene) -> List[int]:
-    """Particles each group inserts, in scene order."""
+    """Particles each group inserts at the start, in scene order (a stream inserts later: 0)."""
     counts = []
     for group in scene.particles:
         insert = group.insert
-        counts.append(len(insert.positions or ()) if insert.kind == "list" else int(insert.count or 0))
+        counts.append(len(insert.positions or ()) if insert.kind == "list"
+                      else 0 if insert.kind == "stream" else int(insert.count or 0))
     return counts
 
 
@@ -603,7 +604,7 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
     """
     found: List[str] = list(solid_warnings(scene))
     count = particle_count(scene)
-    if count == 0:
+    if count == 0 and not any(group.insert.kind == "stream" for group in scene.particles):
         found.append("the scene has no particles")
         return found
     try:

@@ -98,12 +98,17 @@ class BoxRegion(StrictModel):
     box: Box = Field(description="[[x0,y0,z0],[x1,y1,z1]] [m]: particle centres lie at least a radius inside it")
 
 
+# Keys only kind stream reads (insertion over time, pdemfem.particles.stream; docs/streams.md).
+STREAM_KEYS = ("rate", "mass_rate", "start", "stop", "interval")
+
+
 class InsertConfig(StrictModel):
-    kind: Literal["list", "lattice", "random"] = Field(
+    kind: Literal["list", "lattice", "random", "stream"] = Field(
         description="list: explicit positions; lattice: simple cubic in a box; random: random sequential addition "
-                    "(no initial overlap)")
+                    "(no initial overlap); stream: particles inserted over time in region (docs/streams.md)")
     region: Optional[BoxRegion] = Field(None, description="lattice, random: the box the particles are placed in")
-    count: Optional[Annotated[int, Field(gt=0)]] = Field(None, description="lattice, random: number of particles")
+    count: Optional[Annotated[int, Field(gt=0)]] = Field(
+        None, description="lattice, random: number of particles; stream: the most it inserts in all (optional)")
     seed: int = Field(0, description="random seed for radii, jitter and random positions (runs are reproducible)")
     # kind: list
     positions: Optional[List[Vector3]] = Field(None, description="list: particle centres [m]")
@@ -120,11 +125,36 @@ class InsertConfig(StrictModel):
     jitter: Annotated[float, Field(ge=0, le=1)] = Field(
         0.0, description="lattice: random offset of each site as a fraction of the gap spacing - largest diameter")
     max_attempts: Annotated[int, Field(gt=0)] = Field(
-        1000, description="random: tries per particle before the insertion gives up")
+        1000, description="random, stream: tries per particle before the insertion gives up (stream: until the next "
+                          "insertion event)")
+    # kind: stream
+    rate: Optional[PositiveFloat] = Field(None, description="stream: particles inserted per second [1/s]")
+    mass_rate: Optional[PositiveFloat] = Field(None, description="stream: mass inserted per second [kg/s]")
+    start: NonNegativeFloat = Field(0.0, description="stream: time of the first insertion event [s]")
+    stop: Optional[PositiveFloat] = Field(None, description="stream: time the stream ends [s]; default: never")
+    interval: Optional[PositiveFloat] = Field(
+        None, description="stream: time between insertion events [s]; default: the time a particle takes to leave "
+                          "the region (docs/streams.md)")
 
     @model_validator(mode="after")
     def _complete(self):
-        if self.kind == "list":
+        if self.kind != "stream":
+            foreign = sorted(key for key in STREAM_KEYS if key in self.model_fields_set)
+            if foreign:
+                raise ValueError(f"kind {self.kind} does not use {', '.join(foreign)}; remove it, or use kind: stream "
+                                 f"to insert particles over time")
+        if self.kind == "stream":
+            if self.region is None:
+                raise ValueError("kind stream needs region: {box: [[x0,y0,z0],[x1,y1,z1]]} (where particles appear)")
+            if (self.rate is None) == (self.mass_rate is None):
+                raise ValueError("kind stream needs exactly one of rate [1/s] and mass_rate [kg/s]"
+                                 + ("; remove one" if self.rate is not None else "; add one, e.g. rate: 1000"))
+            if self.stop is not None and self.stop <= self.start:
+                raise ValueError(f"stop ({self.stop:g} s) is not after start ({self.start:g} s); make stop > start")
+            for key in ("positions", "velocities", "angular_velocities", "radii", "spacing", "jitter"):
+                if key in self.model_fields_set:
+                    raise ValueError(f"kind stream does not use {key}; remove it")
+        elif self.kind == "list":
             if not self.positions:
                 raise ValueError("kind list needs positions: [[x,y,z], ...]")
             for key in ("velocities", "angular_velocities", "radii"):
@@ -144,7 +174,7 @@ class ParticleGroupConfig(StrictModel):
     material: str = Field(description="a name under materials")
     radius: Union[PositiveFloat, RadiusRange] = Field(
         description="one radius [m], or {min, max} for radii uniformly distributed between the two")
-    insert: InsertConfig = Field(description="how the particles are placed at the start")
+    insert: InsertConfig = Field(description="how the particles are placed at the start (or, kind stream, over time)")
     initial_temperature: Optional[PositiveFloat] = Field(
         None, description="starting temperature [K]; giving it switches heat on (docs/heat.md); with heat on "
                           "and no value: heat.default_temperature")
@@ -164,8 +194,9 @@ class CylinderAxis(StrictModel):
 
 # The keys each wall kind reads (besides name, kind, material, velocity); see docs/walls.md.
 WALL_KIND_KEYS = {
-    "plane": ("point", "normal", "temperature"),
-    "mesh": ("file", "scale", "angular_velocity", "center", "one_sided", "smooth_angle", "temperature"),
+    "plane": ("point", "normal", "temperature", "transport_velocity"),
+    "mesh": ("file", "scale", "angular_velocity", "center", "one_sided", "smooth_angle", "temperature",
+             "transport_velocity"),
     "cylinder": ("axis", "radius", "inside", "angular_velocity", "temperature"),
 }
 
@@ -183,6 +214,10 @@ class WallConfig(StrictModel):
     temperature: Optional[PositiveFloat] = Field(
         None, description="fixed wall temperature [K]: touching particles exchange heat with it (switches heat on); "
                           "absent: the wall is adiabatic (docs/heat.md)")
+    # kind: plane and mesh
+    transport_velocity: Vector3 = Field(
+        (0.0, 0.0, 0.0), description="conveyor: the surface moves with this velocity [m/s] (its part along the "
+                                     "surface) while the geometry stays in place (docs/streams.md)")
     # kind: mesh
     file: Optional[str] = Field(None, description="surface mesh (STL, gmsh .msh, or any meshio format), relative to the scene")
     scale: PositiveFloat = Field(1.0, description="factor applied to the file's coordinates (e.g. 0.001 for mm)")
@@ -268,6 +303,35 @@ class DomainConfig(StrictModel):
         return self
 
 
+class OutletConfig(StrictModel):
+    """A sink: particles whose centre crosses the plane (to the side the normal points to) or enters the box
+    are removed and counted (history mass_out, mass_out_<name>; docs/streams.md)."""
+
+    name: str = Field(description="unique outlet name (history column mass_out_<name>)")
+    kind: Literal["plane", "box"] = Field(description="plane: a half-space beyond point along normal; box: a box")
+    point: Optional[Vector3] = Field(None, description="plane: a point on the plane [m]")
+    normal: Optional[Vector3] = Field(None, description="plane: points out of the simulation, into the removed side")
+    box: Optional[Box] = Field(None, description="box: [[x0,y0,z0],[x1,y1,z1]] [m]: particles whose centre is "
+                                                 "inside are removed")
+
+    @model_validator(mode="after")
+    def _kind_keys(self):
+        used = {"plane": ("point", "normal"), "box": ("box",)}[self.kind]
+        foreign = sorted(key for key in ("point", "normal", "box") if key in self.model_fields_set and key not in used)
+        if foreign:
+            raise ValueError(f"kind {self.kind} does not use {', '.join(foreign)}; remove it "
+                             f"(keys of kind {self.kind}: name, kind, {', '.join(used)})")
+        missing = [key for key in used if getattr(self, key) is None]
+        if missing:
+            example = {"point": "point: [0, 0, 0]", "normal": "normal: [0, 0, -1]",
+                       "box": "box: [[x0,y0,z0],[x1,y1,z1]]"}
+            raise ValueError(f"kind {self.kind} needs {', '.join(missing)} (e.g. "
+                             f"{', '.join(example[key] for key in missing)})")
+        if self.normal is not None and sum(c * c for c in self.normal) == 0.0:
+            raise ValueError("normal must be a non-zero vector")
+        return self
+
+
 class ParallelConfig(StrictModel):
     rebalance_threshold: Annotated[float, Field(ge=1.0)] = Field(
         1.2, description="re-partition the particles when max/mean rank cost exceeds this (checked at list rebuilds)")
@@ -318,6 +382,8 @@ class Scene(StrictModel):
     particles: List[ParticleGroupConfig] = Field(
         default_factory=list, description="particle groups, inserted in list order (ids follow that order)")
     walls: List[WallConfig] = Field(default_factory=list, description="rigid walls: plane, mesh, cylinder")
+    outlets: List[OutletConfig] = Field(
+        default_factory=list, description="sinks removing the particles that reach them (docs/streams.md)")
     output: OutputConfig = Field(default_factory=OutputConfig, description="history.csv and the XDMF series")
     checkpoint: CheckpointConfig = Field(default_factory=CheckpointConfig, description="restart files")
     neighbors: NeighborConfig = Field(default_factory=NeighborConfig, description="the Verlet neighbour list")
@@ -367,7 +433,7 @@ class Scene(StrictModel):
         elif "temperature" in self.output.particles and "particles" in self.output.model_fields_set:
             raise ValueError("output.particles: temperature is written only with heat on; give a particle group "
                              "initial_temperature (or heat: {enabled: true}), or remove temperature from the list")
-        for kind, items in (("particles", self.particles), ("walls", self.walls)):
+        for kind, items in (("particles", self.particles), ("walls", self.walls), ("outlets", self.outlets)):
             names = [item.name for item in items]
             duplicates = sorted({name for name in names if names.count(name) > 1})
             if duplicates:

@@ -27,7 +27,8 @@ def build_contributor_walls(wall_configs, material_names, resolve_file, skin=Non
                 raise SceneError(f"walls[{index}].file", f"{path}: {error.problem}", error.fix) from None
             walls.append(MeshWall(wall.name, vertices, triangles, material, velocity=wall.velocity,
                                   angular_velocity=wall.angular_velocity, center=wall.center,
-                                  smooth_angle=wall.smooth_angle, one_sided=wall.one_sided, skin=skin))
+                                  smooth_angle=wall.smooth_angle, one_sided=wall.one_sided, skin=skin,
+                                  transport_velocity=wall.transport_velocity))
         elif wall.kind == "cylinder":
             walls.append(CylinderWall(wall.name, wall.axis.point, wall.axis.direction, wall.radius, wall.inside,
                                       material, velocity=wall.velocity, angular_velocity=wall.angular_velocity))

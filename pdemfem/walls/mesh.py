@@ -26,6 +26,10 @@ flat plate stays one patch while it deforms.  A caller may pass its own `patch`.
 
 `MeshWall` is a rigid TriangleSurface read from a file with a prescribed velocity
 and angular velocity about a moving centre.
+
+Conveyor (`transport_velocity`): the contact law sees the surface moving with the part of that
+velocity along the contact's tangent plane while the triangles stay where they are (a belt);
+the work it does on the particles is booked with the wall's work.
 """
 from __future__ import annotations
 
@@ -155,8 +159,10 @@ class TriangleSurface(ContributorWall):
 
     def __init__(self, name: str, vertices, triangles, material_index: int, velocities=None, patch=None,
                  smooth_angle: float = 1.0, one_sided: bool = False, skin=None, slots: int = DEFAULT_SLOTS,
-                 spread_to_vertices: bool = False, blended: bool = False):
+                 spread_to_vertices: bool = False, blended: bool = False, transport_velocity=(0.0, 0.0, 0.0)):
         super().__init__(name)
+        # Conveyor: the surface material moves with this velocity along the surface; the geometry stays.
+        self.transport_velocity = np.asarray(transport_velocity, dtype=np.float64).reshape(3).copy()
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3).copy()
         self.triangles = np.ascontiguousarray(triangles, dtype=np.int32).reshape(-1, 3)
         self.vertex_velocities = (np.zeros_like(self.vertices) if velocities is None
@@ -295,7 +301,7 @@ class TriangleSurface(ContributorWall):
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition,
             tables.cohesion_reach, system.dt, state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,
             records.particle, records.triangle, records.weights, records.point, records.force, records.damping,
-            self._scratch_int, self._scratch_float, self._spare_history,
+            self._scratch_int, self._scratch_float, self._spare_history, self.transport_velocity,
             temperatures, heat_flows, self.vertex_temperatures, self.vertex_heat)
         self.contact_count = int(contacts)
         self._step_work = float(work)

@@ -17,7 +17,13 @@ class PlaneWalls(kinds.StateComponent):
         normals = np.array([wall.normal for wall in wall_configs], dtype=float).reshape(count, 3)
         lengths = np.linalg.norm(normals, axis=1) if count else np.zeros(0)
         self.normals = normals / lengths[:, None] if count else normals
-        self.velocities = np.array([wall.velocity for wall in wall_configs], dtype=float).reshape(count, 3)
+        # The velocity the plane moves with, and (velocities) the velocity of its surface the contact law
+        # sees: plus a conveyor's transport_velocity along the plane (the plane itself does not move with it).
+        self.motion = np.array([wall.velocity for wall in wall_configs], dtype=float).reshape(count, 3)
+        transport = np.array([getattr(wall, "transport_velocity", (0.0, 0.0, 0.0)) for wall in wall_configs],
+                             dtype=float).reshape(count, 3)
+        transport -= np.sum(transport * self.normals, axis=1)[:, None] * self.normals
+        self.velocities = self.motion + transport
         self.material_index = np.array([material_names.index(wall.material) for wall in wall_configs],
                                        dtype=np.int32)
         self.forces = np.zeros((count, 3))
@@ -36,7 +42,7 @@ class PlaneWalls(kinds.StateComponent):
         return len(self.names)
 
     def move(self, dt: float) -> None:
-        self.points += dt * self.velocities
+        self.points += dt * self.motion
 
     def largest_displacement_since_build(self) -> float:
         if not self.count:

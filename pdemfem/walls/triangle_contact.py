@@ -309,7 +309,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         coefficients, composition, cohesion_reach, dt,
                         forces, torques, totals, spread_to_vertices, vertex_forces,
                         record_particle, record_triangle, record_weights, record_point, record_force,
-                        record_damping, scratch_int, scratch_float, spare_history,
+                        record_damping, scratch_int, scratch_float, spare_history, transport_velocity,
                         temperatures, heat_flows, vertex_temperatures, vertex_heat):
     """Add the mesh-wall contact forces of particles [first, last).
 
@@ -326,6 +326,8 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
     surface velocity there (3), see pdemfem.coupling.dampers).  scratch_int (M, 5) / scratch_float (M, 8) hold the per-patch
     proposals of one particle (M >= the longest candidate list).  A cohesive contact (composition) holds
     beyond touching down to its pull-off overlap: triangles within radius + cohesion_reach propose.
+    transport_velocity (3): a conveyor surface's velocity; its part along the contact's tangent plane
+    adds to the surface velocity the contact law sees (the geometry does not move).
     Returns (elastic, dissipated, contacts, work done on the particles by the wall, heat [J] it gave them).
     """
     touching_column = history_layout(composition)[2]
@@ -549,6 +551,11 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                     distance = radius - delta
                     scale = norm
                     blend_applied = True
+            # Conveyor: the surface material moves along the surface (the tangential part at this contact).
+            along = transport_velocity[0] * nx + transport_velocity[1] * ny + transport_velocity[2] * nz
+            sx += transport_velocity[0] - along * nx
+            sy += transport_velocity[1] - along * ny
+            sz += transport_velocity[2] - along * nz
             fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = rigid_wall_contact(
                 composition, i, nx, ny, nz, distance, sx, sy, sz, wall_material, history, slot, velocities,
                 angular_velocities, radii, mass, inverse_inertia, material_index, coefficients, dt, forces, torques)
