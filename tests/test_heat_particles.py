@@ -159,9 +159,10 @@ def _compress(sim, wall_name, distance, seconds=0.005):
     index = walls.names.index(wall_name)
     target = walls.points[index] + distance * walls.normals[index]
     steps = int(round(seconds / sim.dt))
-    walls.velocities[index] = walls.normals[index] * distance / (steps * sim.dt)
+    # The plane moves with `motion`; the contact law sees `velocities` (the same here: no conveyor).
+    walls.motion[index] = walls.velocities[index] = walls.normals[index] * distance / (steps * sim.dt)
     sim.step(steps)
-    walls.velocities[index] = 0.0
+    walls.motion[index] = walls.velocities[index] = 0.0
     walls.points[index] = target
 
 

@@ -28,7 +28,7 @@ class PlaneWalls(kinds.StateComponent):
                                        dtype=np.int32)
         self.forces = np.zeros((count, 3))
         # Fixed temperature [K] of each wall with heat on; NaN: adiabatic.
-        self.temperatures = np.array([np.nan if wall.temperature is None else wall.temperature
+        self.temperatures = np.array([np.nan if getattr(wall, "temperature", None) is None else wall.temperature
                                       for wall in wall_configs], dtype=float).reshape(count)
         # (particle, wall) pairs that may touch before the next list build, particle-major.
         self.candidate_particles = np.zeros(0, dtype=np.int64)
