@@ -542,7 +542,7 @@ def _write_file(temporary, comm, encoded, as_json, particle_arrays, global_array
     if comm.rank == 0:
         try:
             layout = _create_layout(temporary, encoded, as_json, comm.size, plan, table_counts, global_arrays or {})
-        except (OSError, RuntimeError) as exc:
+        except Exception as exc:  # any failure on rank 0 alone must reach the ranks waiting in bcast
             layout = write_error_text(exc)
     if comm.size > 1:
         layout = comm.bcast(layout, root=0)
