@@ -21,6 +21,8 @@ Figures per run:
                         calls in this benchmark only (no timers in the solver)
   imbalance             max/mean over ranks of owned particles, and of the time outside
                         communication (compute), at the end
+  collectives/step      the particle system's collective calls (those timed above) per timed step, rank 0,
+                        rebuild steps included (a step without a rebuild makes 2: one MAX, one SUM)
 JSON and a PNG go to benchmarks/results/scaling.{json,png} (or --json PATH).
 """
 from __future__ import annotations
@@ -168,6 +170,7 @@ def worker(args) -> dict:
             "migration": timer.seconds.get("migration", 0.0),
             "reductions": timer.seconds.get("reductions", 0.0),
             "rebuild": timer.rebuild_seconds,
+            "collective_calls": float(timer.calls.get("reductions", 0)),
             "owned": float(system.state.owned_count),
             "ghosts": float(system.state.ghost_count),
             "elapsed": elapsed,
@@ -194,6 +197,7 @@ def worker(args) -> dict:
         "rebuild_seconds_max": max(item["rebuild"] for item in gathered),
         "rebuilds": rebuilds,
         "rebalances": rebalances,
+        "collectives_per_step": gathered[0]["collective_calls"] / max(args.steps, 1),
         "imbalance_particles": float(owned.max() / owned.mean()),
         "imbalance_compute": float(compute.max() / compute.mean()),
         "ghosts_per_owned": float(sum(item["ghosts"] for item in gathered) / owned.sum()),
@@ -234,7 +238,7 @@ def study(mode: str, args) -> list:
 def print_table(mode: str, rows: list) -> None:
     print(f"\n{mode} scaling ({rows[0]['steps']} timed steps after {rows[0]['pre_steps']})")
     print(f"{'ranks':>5} {'particles':>10} {'wall s':>8} {'p-steps/s':>11} {'effic.':>7} {'comm %':>7} "
-          f"{'ghost/migr/red s':>18} {'rebuild s':>9} {'imb. N':>6} {'imb. t':>6} {'ghost/own':>9}")
+          f"{'ghost/migr/red s':>18} {'rebuild s':>9} {'imb. N':>6} {'imb. t':>6} {'ghost/own':>9} {'coll/step':>9}")
     for row in rows:
         parts = row["communication_seconds_by_part_max"]
         print(f"{row['ranks']:>5} {row['particles']:>10} {row['wall_seconds']:>8.2f} "
@@ -242,7 +246,8 @@ def print_table(mode: str, rows: list) -> None:
               f"{100 * row['communication_share']:>6.1f}% "
               f"{parts['ghost']:>5.2f}/{parts['migration']:>5.2f}/{parts['reductions']:>5.2f} "
               f"{row['rebuild_seconds_max']:>9.2f} {row['imbalance_particles']:>6.3f} "
-              f"{row['imbalance_compute']:>6.3f} {row['ghosts_per_owned']:>9.3f}")
+              f"{row['imbalance_compute']:>6.3f} {row['ghosts_per_owned']:>9.3f} "
+              f"{row.get('collectives_per_step', 0.0):>9.2f}")
 
 
 def plot(results: dict, path: Path) -> None:

@@ -240,3 +240,18 @@ def test_sigusr1_to_mpiexec_is_forwarded(tmp_path):
         pytest.skip("no mpiexec")
     stopped = run_stop_case(tmp_path, 2, lambda process, pids: os.kill(process.pid, signal.SIGUSR1))
     assert all(s[1] == "SIGUSR1" for s in stopped)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("where", ["layout", "rows"])
+def test_a_write_failing_on_one_rank_fails_on_every_rank(tmp_path, where):
+    """Rank 0 alone lays the file out, and each rank writes its own rows: a failure there (disk
+    full) must reach the ranks still waiting for the layout or still sorting (else they hang), and
+    leave the previous checkpoint intact and no temporary file."""
+    completed = run_under_mpi(2, "io_checkpoint_failure.py", tmp_path, where, timeout=120)
+    lines = completed.stdout.splitlines()
+    for rank in (0, 1):
+        assert any(line.startswith(f"rank {rank}: could not write the checkpoint (No space left on device")
+                   for line in lines), completed.stdout
+    assert f"files: {checkpoint_path(tmp_path, 1).name}" in lines, completed.stdout
+    assert "previous checkpoint readable: 200 particles" in lines, completed.stdout

@@ -160,7 +160,10 @@ class Solid(kinds.StateComponent):
 
         self.time = 0.0
         self.step_count = 0
-        self.external_work = 0.0  # work of applied loads and supports since construction [J]
+        # Work of applied loads and supports since construction [J]: the sum over the ranks up to the last
+        # reading, and this rank's work since (a step makes no reduction for it: read it at output).
+        self._external_work_summed = 0.0
+        self._external_work_local = 0.0
         self._thermal_energy = 0.0
         self.heat = None  # the heat equation (heat.SolidHeat) when this solid conducts heat
         self.thermoelastic_work = 0.0  # strain energy the temperature changes of the heat path put in [J]
@@ -446,7 +449,7 @@ class Solid(kinds.StateComponent):
             self.damper_work_local += kernels.apply_contact_dampers(
                 self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
                 self._lumped_mass_values, self._constrained, self._damped_nodes, self._dampers, dt, decay, gain)
-        self.external_work += _sum(self.comm, work)
+        self._external_work_local += work
         self.time += dt
         self.step_count += 1
         if self.step_count % BLOWUP_CHECK_EVERY == 0:
@@ -490,6 +493,18 @@ class Solid(kinds.StateComponent):
             )
 
     # ----------------------------------------------------------------- state
+    @property
+    def external_work(self) -> float:
+        """Collective: work of the applied loads and supports since construction [J], summed over the ranks."""
+        self._external_work_summed += _sum(self.comm, self._external_work_local)
+        self._external_work_local = 0.0
+        return self._external_work_summed
+
+    @external_work.setter
+    def external_work(self, value: float) -> None:
+        self._external_work_summed = float(value)
+        self._external_work_local = 0.0
+
     @property
     def positions(self) -> np.ndarray:
         """Current positions (n_owned, 3) [m]."""

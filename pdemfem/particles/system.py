@@ -14,7 +14,8 @@ as *contributors*: objects with
   move(dt)                               advance the body's own kinematics before forces
   add_forces(system, first, last)        add contact forces of owned particles [first, last) to
                                          system.state.forces/torques; return (elastic, dissipated, contacts)
-  reduce(comm)                           sum the body's rank-local totals (called when comm.size > 1)
+  local_totals()                         this rank's totals to sum over the ranks (1-D array, when comm.size > 1)
+  take_summed_totals(summed)             take them back summed (pdemfem.parallel.reductions: one SUM per step)
   step_heat                              with heat on: heat [J] the body gave this rank's particles in
                                          the last add_forces (read after it)
 Their per-particle contact history lives in state.fields (ParticleState.add_field),
@@ -39,6 +40,7 @@ from pdemfem.neighbors.cells import cell_grid, cell_indices
 from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import Decomposition, recursive_bisection
 from pdemfem.parallel.exchange import GhostExchange, migrate
+from pdemfem.parallel.reductions import StepReductions
 from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES, HeatLedger, heat_content, update_temperatures
 from pdemfem.particles.integrate import drift, kick
@@ -95,6 +97,7 @@ class ParticleSystem(kinds.StateComponent):
         self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift
         self.fastest_speed = 0.0  # largest particle speed at the last energies() call
         self.rebalances = 0
+        self.reductions = StepReductions()  # the step's two collectives: one MAX, one SUM
         # `largest_radius`: of the particles inserted later (streams), which the ghost cutoff must cover too.
         largest_radius = max(float(state.radii.max()) if state.count else 0.0, float(largest_radius))
         self.largest_radius = comm.allreduce(largest_radius, op=MPI.MAX)
@@ -133,7 +136,7 @@ class ParticleSystem(kinds.StateComponent):
              state.inverse_inertia, self.gravity, 0.5 * dt)
         largest_displacement_squared = drift(owned, state.positions, state.velocities, dt, state.positions_at_build)
         if self.comm.size > 1:
-            largest_displacement_squared = self.comm.allreduce(largest_displacement_squared, op=MPI.MAX)
+            largest_displacement_squared = self.reductions.largest(self.comm, largest_displacement_squared)
         # Read by the run monitor's runaway stop (same value on every rank).
         self.largest_displacement = math.sqrt(largest_displacement_squared)
         self.walls.move(dt)
@@ -382,12 +385,8 @@ class ParticleSystem(kinds.StateComponent):
             dissipated += extra_dissipated
             contacts += extra_contacts
         if self.comm.size > 1:
-            for contributor in self.contributors:
-                contributor.reduce(self.comm)
-            if walls.count:
-                self.comm.Allreduce(MPI.IN_PLACE, walls.forces, op=MPI.SUM)
-            scalars = np.array([elastic, dissipated, contacts], dtype=float)
-            self.comm.Allreduce(MPI.IN_PLACE, scalars, op=MPI.SUM)
+            scalars = self.reductions.sum_totals(self.comm, (elastic, dissipated, contacts), walls.forces,
+                                                 self.contributors)
             elastic, dissipated, contacts = scalars[0], scalars[1], int(round(scalars[2]))
         self.elastic_energy = float(elastic)
         self.dissipated_energy += float(dissipated)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from mpi4py import MPI
 
 from pdemfem import state_dict as kinds
 from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES
@@ -53,11 +52,14 @@ class ContributorWall(kinds.StateComponent):
         about = np.asarray(about, dtype=float)
         return self.totals[3:] - np.cross(about, self.totals[:3])
 
-    def reduce(self, comm) -> None:
-        buffer = np.append(self.totals, self._step_work)
-        comm.Allreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)
-        self.totals[:] = buffer[:6]
-        self.work += buffer[6] - self._step_work
+    def local_totals(self) -> np.ndarray:
+        """This rank's part of what the step sums over the ranks: force, moment and this step's work."""
+        return np.append(self.totals, self._step_work)
+
+    def take_summed_totals(self, summed: np.ndarray) -> None:
+        """The local_totals() summed over the ranks (the particle system's one SUM per step)."""
+        self.totals[:] = summed[:6]
+        self.work += summed[6] - self._step_work
 
     def set_temperature(self, temperature: float) -> None:
         """Hold the wall at `temperature` [K] (with heat on, touching particles exchange heat with it)."""

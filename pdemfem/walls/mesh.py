@@ -1,7 +1,7 @@
 """Triangle-mesh walls: a triangle surface the particles touch, rigid (MeshWall) or deformable.
 
 `TriangleSurface` is the part both kinds share and a ParticleSystem *contributor*
-(name, move(dt), add_forces(system, first, last), reduce(comm)):
+(name, move(dt), add_forces(system, first, last), local_totals(), take_summed_totals(summed)):
 
     surface = TriangleSurface("plate", vertices, triangles, material_index)
     surface.set_vertices(positions, velocities)   # any time, e.g. every step from the FE nodes

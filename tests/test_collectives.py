@@ -1,0 +1,39 @@
+"""The DEM step makes at most two collectives over the ranks: one MAX (the displacement that decides
+the list rebuild) and one SUM (energies, contact count, plane-wall forces, every mesh/cylinder wall's
+and solid surface's totals in one buffer).  pdemfem.parallel.reductions explains why the count matters.
+
+Counted on 2 ranks by tests/mpi_cases/collectives_case.py, which runs the simulation on a communicator
+class that counts every mpi4py collective call, one `Simulation.step` at a time.  Not counted, by
+design: the run loop's stop checks (one Allreduce every STOP_CHECK_EVERY steps) and output steps (the
+history row's reductions), and steps that rebuild the neighbour list (migration: Alltoall/Alltoallv of
+particles and contact records, the lost-particle count, the imbalance Allgather).  The coupled scene
+advances its FE plate every step (fem_every 1): the FE sub-steps add no mpi4py reduction (their
+external-work diagnostic is summed over the ranks when read); PETSc's own communication (the mass
+matrix products' ghost scatters, the contact surface gather, the blow-up norm every BLOWUP_CHECK_EVERY
+FE steps) is recorded in the case's output but not asserted here.
+"""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from mpi_harness import run_under_mpi
+
+STEPS = 12
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("kind", ["planes", "walls", "coupled"])
+def test_a_dem_step_makes_at_most_two_collectives(kind, tmp_path):
+    out = tmp_path / "counts.json"
+    run_under_mpi(2, "collectives_case.py", kind, out, STEPS)
+    result = json.loads(out.read_text())
+    assert result["contacts"] > 0  # the step computed contacts (pairs, walls, the plate) while counted
+    plain_steps = [step for step in result["steps"] if not step["rebuild"]]
+    assert len(plain_steps) >= STEPS // 2
+    counts = [sum(step["mpi4py"].values()) for step in plain_steps]
+    # At least the MAX: the counter sees the step's collectives (a count of 0 would be a broken counter).
+    assert min(counts) >= 1, counts
+    assert max(counts) <= 2, [step["mpi4py"] for step in plain_steps]
+    assert all(set(step["mpi4py"]) <= {"Allreduce"} for step in plain_steps)  # buffer-based, nothing pickled
