@@ -306,7 +306,7 @@ class Simulation:
             columns += [f"temperature_{body}_{statistic}" for body in ["particles", *self._conducting_solids()]
                         for statistic in ("min", "mean", "max")]
             columns += [f"boundary_heat_{name}_{book}" for name in self._conducting_solids()
-                        for book in self.solids[name].boundary_heat()]
+                        for book in self.solids[name].heat.book_names]
         for name in self._surface_names():
             columns += [f"force_{name}_x", f"force_{name}_y", f"force_{name}_z"]
         for name in self._surface_names():

@@ -10,7 +10,8 @@ particles and contact records, the lost-particle count, the imbalance Allgather)
 advances its FE plate every step (fem_every 1): the FE sub-steps add no mpi4py reduction (their
 external-work diagnostic is summed over the ranks when read); PETSc's own communication (the mass
 matrix products' ghost scatters, the contact surface gather, the blow-up norm every BLOWUP_CHECK_EVERY
-FE steps) is recorded in the case's output but not asserted here.
+FE steps) is recorded in the case's output but not asserted here.  The heated scene (heat on in the
+coupled one) adds none: temperatures ride the ghost exchange, the walls' heat is summed only when read.
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ STEPS = 12
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("kind", ["planes", "walls", "coupled"])
+@pytest.mark.parametrize("kind", ["planes", "walls", "coupled", "heated"])
 def test_a_dem_step_makes_at_most_two_collectives(kind, tmp_path):
     out = tmp_path / "counts.json"
     run_under_mpi(2, "collectives_case.py", kind, out, STEPS)

@@ -93,8 +93,10 @@ class SolidHeat:
             self.conductance += conductance
             self.constant_source += conductance * entry.ambient
             self.convection_books.append((self._book("convection", entry.group), conductance, float(entry.ambient)))
-        self.booked = np.zeros(len(self.book_names))  # global totals [J]
-        self.nodal_heat_added = 0.0  # J put in through add_nodal_heat since construction
+        # Books [J] per boundary entry and the heat put in through add_nodal_heat: global totals up to the last
+        # read, plus this rank's part since (summed over the ranks only when read: no reduction per advance).
+        self._booked_total = np.zeros(len(self.book_names) + 1)
+        self._booked_local = np.zeros(len(self.book_names) + 1)
 
         self._eigenvalue_bound = None
         self._implicit_dt = None
@@ -208,36 +210,52 @@ class SolidHeat:
         local = float(np.dot(self.capacity, self.temperature_vec.getArray(readonly=True)))
         return self.comm.allreduce(local, op=MPI.SUM)
 
+    def _settle_books(self) -> np.ndarray:
+        """Collective: the books' global totals (this rank's parts since the last read summed in)."""
+        local = self._booked_local.copy()
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+        self._booked_total += local
+        self._booked_local[:] = 0.0
+        return self._booked_total
+
+    @property
+    def booked(self) -> np.ndarray:
+        """Collective: heat [J] in through each boundary entry since construction (book_names order)."""
+        return self._settle_books()[:-1].copy()
+
+    @property
+    def nodal_heat_added(self) -> float:
+        """Collective: heat [J] put in through add_nodal_heat since construction."""
+        return float(self._settle_books()[-1])
+
     def boundary_heat(self) -> dict:
-        """Not collective (the totals are global): heat [J] that entered through each boundary entry since
-        construction, keyed '<kind>_<group>' (kind fixed, flux or convection; negative: heat left)."""
-        return {name: float(self.booked[book]) for book, name in enumerate(self.book_names)}
+        """Collective: heat [J] that entered through each boundary entry since construction, keyed
+        '<kind>_<group>' (kind fixed, flux or convection; negative: heat left)."""
+        booked = self.booked
+        return {name: float(booked[book]) for book, name in enumerate(self.book_names)}
 
     # ------------------------------------------------------------ advance
     def advance(self, interval: float) -> tuple:
         """Collective: advance the temperatures over `interval` with the nodal heat added since the last
-        advance (constant over it); returns (steps taken, whether any temperature changed)."""
+        advance (constant over it); returns the steps taken.  No reduction: the books stay rank-local until
+        read (booked, boundary_heat, nodal_heat_added)."""
         self.nodal_heat_vec.assemble()
         nodal = self.nodal_heat_vec.getArray(readonly=True).copy()
         self.nodal_heat_vec.zeroEntries()
         source = self.constant_source + nodal
-        local = np.zeros(len(self.book_names) + 2)  # books, nodal heat, changed
-        before = self.temperature_vec.getArray(readonly=True).copy()
+        local = self._booked_local  # books, then the nodal heat
         if self.scheme == "explicit":
             steps = max(1, math.ceil(interval / self.critical_time_step() * (1.0 - 1e-12)))
             dt = interval / steps
             for _ in range(steps):
                 self._explicit_step(dt, source, local)
-                local[-2] += dt * nodal.sum()
+                local[-1] += dt * nodal.sum()
         else:
             steps = 1
             self._implicit_step(interval, source, local)
-            local[-2] += interval * nodal.sum()
-        local[-1] = float(not np.array_equal(before, self.temperature_vec.getArray(readonly=True)))
-        self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
-        self.booked += local[:-2]
-        self.nodal_heat_added += local[-2]
-        return steps, bool(local[-1] > 0.0)
+            local[-1] += interval * nodal.sum()
+        return steps
 
     def _book_constant_and_convection(self, dt: float, temperature: np.ndarray, local: np.ndarray) -> None:
         for book, power in self.flux_books:
@@ -336,15 +354,17 @@ class SolidHeat:
     def state_dict(self, nodes: np.ndarray) -> dict:
         """Collective: the books and the pending nodal heat (by input node number)."""
         self.nodal_heat_vec.assemble()
-        return {"booked": kinds.scalar([float(value) for value in self.booked]),
+        totals = self._settle_books()
+        return {"booked": kinds.scalar([float(value) for value in totals[:-1]]),
                 "book_names": kinds.scalar(list(self.book_names)),
-                "nodal_heat_added": kinds.scalar(float(self.nodal_heat_added)),
+                "nodal_heat_added": kinds.scalar(float(totals[-1])),
                 "pending": kinds.keyed_slab(self.nodal_heat_vec.getArray(readonly=True).copy(), nodes)}
 
     def load_state_dict(self, state: dict, nodes: np.ndarray) -> None:
         if list(state["book_names"]) != self.book_names:
             raise kinds.StateMismatch(f"solid '{self.name}' books heat through {self.book_names}, the checkpoint "
                                       f"through {list(state['book_names'])}")
-        self.booked = np.array(state["booked"], dtype=float).reshape(len(self.book_names))
-        self.nodal_heat_added = float(state["nodal_heat_added"])
+        self._booked_total[:-1] = np.array(state["booked"], dtype=float).reshape(len(self.book_names))
+        self._booked_total[-1] = float(state["nodal_heat_added"])
+        self._booked_local[:] = 0.0
         self.nodal_heat_vec.setArray(np.ascontiguousarray(np.asarray(state["pending"])[nodes]))

@@ -252,13 +252,13 @@ class Solid(kinds.StateComponent):
         return self._heat_or_error().thermal_energy()
 
     def boundary_heat(self) -> dict:
-        """Not collective: heat [J] that entered through each thermal boundary entry since construction,
+        """Collective: heat [J] that entered through each thermal boundary entry since construction,
         keyed '<kind>_<group>' (fixed_<g>, flux_<g>, convection_<g>; negative: the heat left)."""
         return self._heat_or_error().boundary_heat()
 
     @property
     def nodal_heat_added(self) -> float:
-        """Heat [J] put in through add_nodal_heat since construction (the same on every rank)."""
+        """Collective: heat [J] put in through add_nodal_heat since construction."""
         return self._heat_or_error().nodal_heat_added
 
     def heat_critical_time_step(self) -> float:
@@ -406,8 +406,10 @@ class Solid(kinds.StateComponent):
         mechanics of the next advance sees it: a staggered, one-advance-lagged thermo-elastic coupling)."""
         if self.heat is None:
             return
-        _, changed = self.heat.advance(interval)
-        if changed and self._thermal_load_coefficient != 0.0:
+        self.heat.advance(interval)
+        # Refreshed after every advance (deciding whether any temperature changed would take a reduction
+        # over the ranks per advance; with heat flowing it nearly always has).
+        if self._thermal_load_coefficient != 0.0:
             # The strain energy 1/2 u.K u - f_th.u + E_th jumps at fixed u when the thermal load changes:
             # book it, so an energy balance of the solid can close.
             before = self._thermal_energy - self.thermal_load_vec.dot(self.displacement_vec)

@@ -70,6 +70,13 @@ def scene(kind: str, folder: Path) -> dict:
     if kind == "coupled":
         data["coupling"] = {"fem_every": 1}
         return data
+    if kind == "heated":
+        # The coupled scene with heat on: grains, a hot wall and the plate conduct (temperatures on the
+        # ghosts, the walls' heat ledger, the plate's surface temperatures and nodal heat every advance).
+        data = restart_scenes.heated(data)
+        data["materials"]["plate"].update(conductivity=200.0, heat_capacity=900.0)
+        data["coupling"] = {"fem_every": 1}
+        return data
     raise SystemExit(f"unknown kind {kind}")
 
 
