@@ -154,6 +154,25 @@ def janssen_wall_stress(depth, bulk_density: float, wall_friction: float, k_rati
     return scale * (1.0 - np.exp(-4.0 * wall_friction * k_ratio * depth / hydraulic))
 
 
+def janssen_floor_share(height: float, wall_friction: float, k_ratio: float, hydraulic: float) -> float:
+    """Share of a column's weight that Janssen's vertical stress leaves on the floor under a fill of `height`:
+    sigma_v(H) A / (rho_b g H A) = (D_h / (4 mu_w K H)) (1 - exp(-4 mu_w K H / D_h))."""
+    x = 4.0 * wall_friction * k_ratio * height / hydraulic
+    return (1.0 - math.exp(-x)) / x
+
+
+def k_from_floor_share(share: float, height: float, wall_friction: float, hydraulic: float) -> float:
+    """The K for which Janssen's floor share equals the measured one (it falls with K: bisection)."""
+    low, high = 1e-4, 20.0
+    for _ in range(100):
+        middle = 0.5 * (low + high)
+        if janssen_floor_share(height, wall_friction, middle, hydraulic) > share:
+            low = middle
+        else:
+            high = middle
+    return 0.5 * (low + high)
+
+
 def fit_janssen_k(depth, stress, bulk_density, wall_friction, hydraulic) -> float:
     """The K that minimises the squared misfit of Janssen's profile to the measured stresses (golden section)."""
     def misfit(k_ratio):
@@ -277,11 +296,14 @@ def closed_bin(settle: float, floor_speed: float, folder: Path, ranks: int, dens
     k_fit = fit_janssen_k(depths, measured, bulk_density, wall_friction, hydraulic)
     janssen = janssen_wall_stress(depths, bulk_density, wall_friction, k_jaky, hydraulic)
     hydrostatic = k_jaky * bulk_density * GRAVITY * depths
+    k_floor = k_from_floor_share(floor_share, surface, wall_friction, hydraulic) if floor_share < 1 else float("nan")
     result = {
         "seconds": time.perf_counter() - started, "settle_time": settle, "floor_speed": floor_speed,
         "kinetic_energy_end": float(history["kinetic_energy"][-1]), "floor_share_of_weight": floor_share,
         "free_surface": surface, "bulk_density": bulk_density, "packing_fraction": bulk_density / density,
         "hydraulic_diameter": hydraulic, "k_jaky": k_jaky, "phi_deg": math.degrees(phi), "k_fit": k_fit,
+        "k_from_floor_share": k_floor,
+        "floor_share_janssen_k_jaky": janssen_floor_share(surface, wall_friction, k_jaky, hydraulic),
         "rows": [{"depth": float(z), "height": float(h), "stress": float(s), "janssen": float(j),
                   "ratio": float(s / j), "hydrostatic_k_jaky": float(p)}
                  for z, h, s, j, p in zip(depths, centres[below], measured, janssen, hydrostatic)],
@@ -289,7 +311,8 @@ def closed_bin(settle: float, floor_speed: float, folder: Path, ranks: int, dens
     print(f"closed bin, floor moving down at {floor_speed * 1000:.1f} mm/s: free surface {surface * 1000:.1f} mm, "
           f"rho_b {bulk_density:.0f} kg/m^3 (packing {bulk_density / density:.3f}), floor carries "
           f"{floor_share:.2f} of the weight, K Jaky {k_jaky:.3f} (phi = atan(mu) = {math.degrees(phi):.1f} deg), "
-          f"K fitted {k_fit:.3f}, kinetic energy at the end {history['kinetic_energy'][-1]:.2e} J")
+          f"(Janssen with it: {janssen_floor_share(surface, wall_friction, k_jaky, hydraulic):.2f}), "
+          f"K fitted to the wall stresses {k_fit:.3f}, K from the floor share {k_floor:.3f}, kinetic energy at the end {history['kinetic_energy'][-1]:.2e} J")
     print(f"{'depth mm':>9} {'sigma_w Pa':>11} {'Janssen Pa':>11} {'ratio':>6} {'K rho g z Pa':>12}")
     for row in result["rows"]:
         print(f"{row['depth'] * 1000:9.1f} {row['stress']:11.1f} {row['janssen']:11.1f} {row['ratio']:6.2f} "
