@@ -29,7 +29,7 @@ References (constants stated as used):
   with phi = atan(mu) the friction angle of the grain contacts is stated, and the K that fits the
   measured profile best is reported beside it.
 
-    python benchmarks/hopper_discharge.py                 # b = 16, 20, 24 mm, 2 ranks, ~minutes each
+    python benchmarks/hopper_discharge.py --ranks 1       # b = 16, 20, 24 mm: the figures of docs/applications_hopper.md
     python benchmarks/hopper_discharge.py --slots 0.016 0.024 --end 0.35 --ranks 1
     python benchmarks/hopper_discharge.py --plots docs/img  # hopper_beverloo.png, hopper_janssen.png
 
