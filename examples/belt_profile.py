@@ -100,6 +100,10 @@ def main(argv=None):
     history = read_history(args.run / "history.csv")
     in_scene = float(history["mass_in"][-1] - history["mass_out"][-1])
     reactions = [float(history[f"reaction_{solid.name}_{name}_z"][-1]) for name in solid.regions]
+    # The last third of the run (steady loading): time means smooth out the impacts and the belt's ringing.
+    steady = history["time"] >= history["time"][-1] * 2.0 / 3.0
+    mean_reactions = [float(np.mean(history[f"reaction_{solid.name}_{name}_z"][steady])) for name in solid.regions]
+    mean_gravel = float(np.mean((history["mass_in"] - history["mass_out"])[steady]))
 
     top_centre = (np.abs(points[:, 1] - 0.5 * (y0 + y1)) < 1e-9) & (np.abs(points[:, 2] - z1) < 1e-9)
     order = np.argsort(points[top_centre, 0])
@@ -117,9 +121,12 @@ def main(argv=None):
         print(f"{name} span mid-span sag: measured {measured[k] * 1e3:.3f} mm, estimate {plate[k] * 1e3:.3f} "
               f"(plate EI) .. {beam[k] * 1e3:.3f} mm (beam EI); measured / beam estimate {measured[k] / beam[k]:.3f}")
     estimate = idler_loads(span, load_1, load_2)
-    print("idler loads [N]: measured " + ", ".join(f"{value:.3f}" for value in reactions)
-          + " (sum %.3f); estimate " % sum(reactions) + ", ".join(f"{value:.3f}" for value in estimate)
-          + " (sum %.3f)" % sum(estimate))
+    print("idler loads [N] (" + ", ".join(solid.regions) + "): at the end " + ", ".join(f"{value:.3f}" for value in reactions)
+          + " (sum %.3f); mean over the last third " % sum(reactions)
+          + ", ".join(f"{value:.3f}" for value in mean_reactions) + " (sum %.3f); estimate " % sum(mean_reactions)
+          + ", ".join(f"{value:.3f}" for value in estimate) + " (sum %.3f)" % sum(estimate))
+    print(f"weight: belt {belt_load * length:.3f} N + gravel {mean_gravel * gravity:.3f} N (mean mass_in - mass_out "
+          f"over the last third) = {belt_load * length + mean_gravel * gravity:.3f} N")
 
     if args.png is not None:
         import matplotlib

@@ -36,7 +36,7 @@ class DampingConfig(StrictModel):
 class PrescribedConfig(StrictModel):
     """Prescribed motion of a group: constant velocity or constant displacement (null = free component)."""
 
-    group: str = Field(description="a physical group of the mesh, or a box face xmin..zmax")
+    group: str = Field(description="a physical group of the mesh, a box face xmin..zmax, or a region")
     velocity: Optional[PartialVector3] = Field(None, description="constant velocity [m/s]; null components are free")
     displacement: Optional[PartialVector3] = Field(
         None, description="constant displacement [m]; null components are free")
@@ -161,7 +161,7 @@ class SolidConfig(StrictModel):
     regions: Dict[str, RegionConfig] = Field(
         default_factory=dict, description="named node groups chosen by a box or cylinder, usable under fixed and "
                                           "prescribed (the nodes within 1e-3 x the shortest edge of the region)")
-    fixed: List[str] = Field(default_factory=list, description="groups (or box faces xmin..zmax) clamped in x, y and z")
+    fixed: List[str] = Field(default_factory=list, description="groups, box faces (xmin..zmax) or regions clamped in x, y and z")
     prescribed: List[PrescribedConfig] = Field(default_factory=list, description="groups with prescribed motion")
     contact: List[str] = Field(default_factory=list, description="surface groups that particles may touch")
     transport_velocity: Vector3 = Field(
