@@ -413,10 +413,9 @@ class Simulation:
 
     def energies(self) -> dict:
         energies = self.particle_system.energies()
-        # Work done on the particles by moving mesh and cylinder walls (the solids' surfaces are not
-        # moved by a prescription: their exchange with the particles is internal to the system).
-        energies["wall_work"] += sum(wall.work for wall in self.contributor_walls
-                                     if not any(wall is surface.triangle_surface for surface in self.coupled_surfaces))
+        # Work done on the particles by moving mesh and cylinder walls; a solid's surface books only its
+        # transport velocity's work (its own motion exchanges work inside the system).
+        energies["wall_work"] += sum(wall.work for wall in self.contributor_walls)
         if self.solids:
             energies["dissipated_energy"] += self.dashpot_dissipation()
         energies["solid_kinetic_energy"] = sum(solid.kinetic_energy() for solid in self.solids.values())

@@ -24,7 +24,8 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem import state_dict as kinds
-from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_ID, RECORD_INDEX, balance_particles, make_records,
+from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_DAMPING, RECORD_ID, RECORD_INDEX, balance_particles,
+                                      make_records,
                                       node_dampers)
 from pdemfem.coupling.transfer import (SUB_TRIANGLE_AREA_COORDINATES, parent_faces_from_split, spread_linear,
                                        spread_quadratic)
@@ -44,7 +45,8 @@ class CoupledSurface(kinds.StateComponent):
         _, positions, velocities = solid.surface_state()
         self.triangle_surface = TriangleSurface(self.name, positions, self.triangles, material_index,
                                                 velocities=velocities, smooth_angle=smooth_angle, skin=skin,
-                                                blended=blended)
+                                                blended=blended, work_of_transport_only=True,
+                                                transport_velocity=solid.config.transport_velocity)
         self.node_forces = np.zeros((len(self.node_indices), 3))
         # Forces summed over the DEM steps since the last FE advance (sub-cycling).
         self.accumulated_forces = np.zeros_like(self.node_forces)
@@ -66,6 +68,8 @@ class CoupledSurface(kinds.StateComponent):
         if keep_dampers and self.particle_system is not None and len(contacts.triangle):
             records = make_records(contacts.particle, self.particle_system.state.ids[contacts.particle],
                                    contacts.triangle, contacts.weights, contacts.damping)
+            if len(records) and np.any(self.triangle_surface.transport_velocity):
+                self._remove_transport(records)
             if len(records):
                 self.damper_records.append(records)
         self.node_forces[:] = 0.0
@@ -79,6 +83,16 @@ class CoupledSurface(kinds.StateComponent):
             # The contacts' normal elastic forces, spread over the nodes under the particle by the blended gap.
             self.node_forces += self.triangle_surface.vertex_forces
         self.accumulated_forces += self.node_forces
+
+    def _remove_transport(self, records) -> None:
+        """Conveyor: express the records' particle and surface velocities relative to the moving belt
+        material (minus the transport velocity's tangential part at each contact), so the solid's nodal
+        dashpots act on C (u_p - T_t - v_k) and the particles' balance (dampers.py) stays exact."""
+        transport = self.triangle_surface.transport_velocity
+        normals = records[:, RECORD_DAMPING + 2:RECORD_DAMPING + 5]
+        tangential = transport - (normals @ transport)[:, None] * normals
+        records[:, RECORD_DAMPING + 6:RECORD_DAMPING + 9] -= tangential
+        records[:, RECORD_DAMPING + 9:RECORD_DAMPING + 12] -= tangential
 
     def send_forces_to_solid(self, scale: float, dampers: bool = True) -> None:
         """Add scale x the accumulated forces to the solid's nodal loads (ADD_VALUES to the owners).

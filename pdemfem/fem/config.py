@@ -5,9 +5,9 @@ cost of every knob is documented in docs/fem.md.
 """
 from __future__ import annotations
 
-from typing import Annotated, List, Literal, Optional, Tuple, Union
+from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import AfterValidator, Field, field_validator, model_validator
 
 from pdemfem.config_types import Box, NonNegativeFloat, PositiveFloat, StrictModel, Vector3
 
@@ -36,7 +36,7 @@ class DampingConfig(StrictModel):
 class PrescribedConfig(StrictModel):
     """Prescribed motion of a group: constant velocity or constant displacement (null = free component)."""
 
-    group: str = Field(description="a physical group of the mesh, or a box face xmin..zmax")
+    group: str = Field(description="a physical group of the mesh, a box face xmin..zmax, or a region")
     velocity: Optional[PartialVector3] = Field(None, description="constant velocity [m/s]; null components are free")
     displacement: Optional[PartialVector3] = Field(
         None, description="constant displacement [m]; null components are free")
@@ -107,6 +107,47 @@ class ThermalConfig(StrictModel):
                 for index, entry in enumerate(getattr(self, kind))]
 
 
+def _region_box(box):
+    low, high = box
+    if any(h < l for l, h in zip(low, high)):
+        raise ValueError("a region box must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] with every max >= min "
+                         "(max = min selects a plane of nodes)")
+    return box
+
+
+# A region's box may be flat (max = min on an axis): the nodes on a plane, a line or a point.
+RegionBox = Annotated[Tuple[Vector3, Vector3], AfterValidator(_region_box)]
+
+
+class CylinderRegionConfig(StrictModel):
+    """An infinite cylinder: the points within `radius` of the line through `point` along `direction`."""
+
+    point: Vector3 = Field(description="a point on the cylinder's axis [m]")
+    direction: Vector3 = Field(description="the axis direction (any length, not zero)")
+    radius: PositiveFloat = Field(description="the cylinder's radius [m]")
+
+    @field_validator("direction")
+    @classmethod
+    def _nonzero(cls, value):
+        if not any(value):
+            raise ValueError("the cylinder's direction is the zero vector; give the axis direction, e.g. [0, 1, 0]")
+        return value
+
+
+class RegionConfig(StrictModel):
+    """A node group chosen by a region of space: exactly one of box or cylinder (docs/fem.md)."""
+
+    box: Optional[RegionBox] = Field(
+        None, description="[[x0,y0,z0],[x1,y1,z1]]: the nodes inside this box [m] (may be flat: x0 = x1 is a plane)")
+    cylinder: Optional[CylinderRegionConfig] = Field(None, description="the nodes inside this infinite cylinder")
+
+    @model_validator(mode="after")
+    def _one_shape(self):
+        if (self.box is None) == (self.cylinder is None):
+            raise ValueError("give exactly one of box: [[x0,y0,z0],[x1,y1,z1]] or cylinder: {point, direction, radius}")
+        return self
+
+
 class SolidConfig(StrictModel):
     name: str = Field(description="unique solid name (shares one namespace with the walls)")
     mesh: Union[str, BoxMeshConfig] = Field(
@@ -117,9 +158,15 @@ class SolidConfig(StrictModel):
     mass: Literal["lumped", "consistent"] = Field(
         "lumped", description="lumped: diagonal mass, no solve per step; consistent: a mass solve per step")
     damping: DampingConfig = Field(default_factory=DampingConfig, description="Rayleigh damping")
-    fixed: List[str] = Field(default_factory=list, description="groups (or box faces xmin..zmax) clamped in x, y and z")
+    regions: Dict[str, RegionConfig] = Field(
+        default_factory=dict, description="named node groups chosen by a box or cylinder, usable under fixed and "
+                                          "prescribed (the nodes within 1e-3 x the shortest edge of the region)")
+    fixed: List[str] = Field(default_factory=list, description="groups, box faces (xmin..zmax) or regions clamped in x, y and z")
     prescribed: List[PrescribedConfig] = Field(default_factory=list, description="groups with prescribed motion")
     contact: List[str] = Field(default_factory=list, description="surface groups that particles may touch")
+    transport_velocity: Vector3 = Field(
+        (0.0, 0.0, 0.0), description="conveyor: the contact surface's material moves with this velocity [m/s] "
+                                     "(its part along the contact's tangent plane) while the mesh stays")
     tractions: List[TractionConfig] = Field(default_factory=list, description="constant surface tractions")
     point_forces: List[PointForceConfig] = Field(default_factory=list, description="constant nodal forces")
     initial_temperature: Optional[PositiveFloat] = Field(
@@ -138,6 +185,18 @@ class SolidConfig(StrictModel):
         clash = sorted(set(self.fixed) & set(prescribed))
         if clash:
             raise ValueError(f"groups {clash} are both fixed and prescribed; keep each group in one list")
+        faces = sorted(set(self.regions) & set(BOX_FACES))
+        if faces:
+            raise ValueError(f"regions {faces} are named like box faces; choose another name")
+        # A region is a set of nodes: loads per area and contact need the faces of a surface group.
+        surface_keys = [(f"tractions[{i}].group", t.group) for i, t in enumerate(self.tractions)]
+        surface_keys += [(f"contact[{i}]", group) for i, group in enumerate(self.contact)]
+        if self.thermal is not None:
+            surface_keys += [(f"thermal.{kind}[{i}].group", group) for kind, i, group in self.thermal.groups()]
+        for key, group in surface_keys:
+            if group in self.regions:
+                raise ValueError(f"{key}: '{group}' is a region (a set of nodes); tractions, contact and thermal "
+                                 "boundaries need a surface group of the mesh (a gmsh physical group or a box face)")
         return self
 
     def temperatures(self) -> Tuple[Optional[float], Optional[float]]:

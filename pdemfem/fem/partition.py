@@ -23,6 +23,7 @@ import numpy as np
 from pdemfem.errors import MeshError, PdemfemError
 from pdemfem.fem.elements import p2_connectivity, edge_midside_nodes
 from pdemfem.fem.mesh import GlobalMesh
+from pdemfem.fem.regions import region_node_groups
 
 
 @dataclass
@@ -82,8 +83,10 @@ def _face_nodes(mesh: GlobalMesh, faces: np.ndarray, element: str, edges, n_corn
     return np.column_stack([faces, *mids])
 
 
-def build_partition(mesh: GlobalMesh, element: str, n_parts: int, group_names, contact_names, points_of_interest):
-    """Rank 0: one dict of local-mesh arrays per rank."""
+def build_partition(mesh: GlobalMesh, element: str, n_parts: int, group_names, contact_names, points_of_interest,
+                    regions=None, region_key="regions"):
+    """Rank 0: one dict of local-mesh arrays per rank.  regions: name -> RegionConfig, node groups
+    (no faces) chosen by geometry (pdemfem.fem.regions); region_key names them in errors."""
     n_corners = len(mesh.points)
     edges = None
     if element == "P2":
@@ -92,7 +95,10 @@ def build_partition(mesh: GlobalMesh, element: str, n_parts: int, group_names, c
         points, cells = mesh.points, mesh.tets
     n_nodes, n_cells = len(points), len(cells)
     nen = cells.shape[1]
-    faces_of = {name: _face_nodes(mesh, mesh.group_faces(name), element, edges, n_corners) for name in set(group_names) | set(contact_names)}
+    regions = regions or {}
+    region_nodes = region_node_groups(points, mesh.tets, regions, region_key, mesh.face_groups)
+    faces_of = {name: _face_nodes(mesh, mesh.group_faces(name), element, edges, n_corners)
+                for name in (set(group_names) | set(contact_names)) - set(regions)}
 
     part = partition_cells(mesh.tets, n_parts)
     first_cell = np.full(n_nodes, n_cells, dtype=np.int64)
@@ -110,6 +116,8 @@ def build_partition(mesh: GlobalMesh, element: str, n_parts: int, group_names, c
     owner_new = owner[node_order]
     faces_new = {name: new_of_old[faces] for name, faces in faces_of.items()}
     contact_new = {name: faces_new[name] for name in contact_names}
+    region_nodes_new = {name: np.sort(new_of_old[nodes]) for name, nodes in region_nodes.items()}
+    face_width = 3 if element == "P1" else 6
     if len(points_of_interest):
         targets = np.asarray(points_of_interest, float)
         nearest = [int(np.argmin(np.sum((points - t) ** 2, axis=1))) for t in targets]
@@ -142,6 +150,9 @@ def build_partition(mesh: GlobalMesh, element: str, n_parts: int, group_names, c
             group_faces[name] = to_local(faces[touching]).reshape(-1, faces.shape[1])
             nodes = np.unique(faces)
             group_nodes[name] = nodes[(nodes >= first) & (nodes < end)] - first
+        for name, nodes in region_nodes_new.items():  # a region is nodes only: no faces
+            group_faces[name] = np.zeros((0, face_width), dtype=np.int64)
+            group_nodes[name] = nodes[(nodes >= first) & (nodes < end)] - first
         payloads.append(
             dict(
                 source=mesh.source,
@@ -169,7 +180,8 @@ def mesh_description(exc: Exception) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
-def distribute_mesh(comm, load_global_mesh, element: str, group_names, contact_names, points_of_interest=()) -> LocalMesh:
+def distribute_mesh(comm, load_global_mesh, element: str, group_names, contact_names, points_of_interest=(),
+                    regions=None, region_key="regions") -> LocalMesh:
     """Collective: rank 0 calls load_global_mesh() and partitions; every rank gets its LocalMesh.
 
     A MeshError on rank 0 is raised on every rank, so all exit together.
@@ -177,7 +189,8 @@ def distribute_mesh(comm, load_global_mesh, element: str, group_names, contact_n
     payloads, error = None, None
     if comm.rank == 0:
         try:
-            payloads = build_partition(load_global_mesh(), element, comm.size, group_names, contact_names, points_of_interest)
+            payloads = build_partition(load_global_mesh(), element, comm.size, group_names, contact_names,
+                                       points_of_interest, regions, region_key)
         except PdemfemError as exc:
             error = (type(exc).__name__, exc.where, exc.problem, exc.fix)
         except Exception as exc:  # a bug must not leave the other ranks waiting in bcast

@@ -103,6 +103,7 @@ class Solid(kinds.StateComponent):
                 comm, lambda: load_mesh(config.mesh, Path(base_dir)), config.element,
                 groups + [group for _, _, group in thermal_groups], list(config.contact),
                 [p.point for p in config.point_forces],
+                regions=config.regions, region_key=f"solids ({config.name})",
             )
         except MeshError as error:
             _raise_thermal_group_error(config.name, error, groups, thermal_groups)

@@ -159,8 +159,12 @@ class TriangleSurface(ContributorWall):
 
     def __init__(self, name: str, vertices, triangles, material_index: int, velocities=None, patch=None,
                  smooth_angle: float = 1.0, one_sided: bool = False, skin=None, slots: int = DEFAULT_SLOTS,
-                 spread_to_vertices: bool = False, blended: bool = False, transport_velocity=(0.0, 0.0, 0.0)):
+                 spread_to_vertices: bool = False, blended: bool = False, transport_velocity=(0.0, 0.0, 0.0),
+                 work_of_transport_only: bool = False):
         super().__init__(name)
+        # A solid's surface: its own motion exchanges work with the particles inside the system, so `work`
+        # books only what the transport velocity does (the belt drive's work).
+        self.work_of_transport_only = bool(work_of_transport_only)
         # Conveyor: the surface material moves with this velocity along the surface; the geometry stays.
         self.transport_velocity = np.asarray(transport_velocity, dtype=np.float64).reshape(3).copy()
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3).copy()
@@ -304,9 +308,21 @@ class TriangleSurface(ContributorWall):
             self._scratch_int, self._scratch_float, self._spare_history, self.transport_velocity,
             temperatures, heat_flows, self.vertex_temperatures, self.vertex_heat)
         self.contact_count = int(contacts)
+        if self.work_of_transport_only:
+            work = self._transport_work(system.dt)
         self._step_work = float(work)
         self.work += self._step_work
         return elastic, dissipated, contacts
+
+    def _transport_work(self, dt: float) -> float:
+        """Work [J] of this step's contact forces on the particles times the transport velocity's part
+        along each contact's tangent plane (the contact records hold the force on the surface and n)."""
+        contacts = self.contacts
+        if not len(contacts.particle) or not np.any(self.transport_velocity):
+            return 0.0
+        normals = contacts.damping[:, 2:5]
+        tangential = self.transport_velocity - (normals @ self.transport_velocity)[:, None] * normals
+        return -float(np.sum(contacts.force * tangential)) * dt
 
     @property
     def contacts(self) -> SimpleNamespace:
