@@ -3,6 +3,12 @@
     python benchmarks/scaling.py --mode strong --particles 200000 --ranks 1 2
     python benchmarks/scaling.py --mode weak --per-rank 50000 --ranks 1 2 4
     python benchmarks/scaling.py --mode both --particles 20000 --per-rank 10000 --ranks 1 2 --steps 200
+    python benchmarks/scaling.py --mode fem --columns 40 --rows 20 --layers 2 --ranks 1 2 --steps 200
+    python benchmarks/scaling.py --mode coupled --columns 16 --rows 8 --layers 1 --particles 4000 --ranks 1 2
+
+Modes strong / weak / both time the DEM; fem times an FE plate alone and coupled the whole coupled
+step (benchmarks/scaling_solids.py: the scenes), each strong (--study strong: fixed size) or weak
+(--study weak: --columns and --per-rank per rank).
 
 The scene is benchmarks/settle.py's (glass spheres d = 2 mm, E = 5 MPa, mu = 0.5, e = 0.5,
 dt = 2e-5 s, skin 0.3 r, settling in a five-wall box) on a compact lattice (spacing 2.04 mm,
@@ -206,6 +212,40 @@ def worker(args) -> dict:
     }
 
 
+def launch_solids(ranks: int, args) -> dict:
+    with tempfile.TemporaryDirectory(prefix="scaling-run-") as scratch:
+        part = os.path.join(scratch, "run.json")
+        prefix = ([*shlex.split(args.launcher), "-n", str(ranks)] if args.launcher
+                  else [sys.executable, "-m", "pdemfem.launch", "-n", str(ranks), "--"])
+        command = [*prefix, sys.executable, str(Path(__file__).resolve()), WORKER_FLAG, part, "--mode", args.mode,
+                   "--study", args.study, "--columns", str(args.columns), "--rows", str(args.rows),
+                   "--layers", str(args.layers), "--particles", str(args.particles), "--per-rank",
+                   str(args.per_rank), "--steps", str(args.steps), "--pre-steps", str(args.pre_steps)]
+        subprocess.run(command, check=True, cwd=REPOSITORY)
+        with open(part) as handle:
+            return json.load(handle)
+
+
+def solids_study(args) -> list:
+    rows = []
+    for ranks in args.ranks:
+        print(f"[{args.mode}, {args.study}] {ranks} rank(s) ...", flush=True)
+        rows.append(launch_solids(ranks, args))
+    base = rows[0]["wall_seconds"] / rows[0]["steps"]
+    for row in rows:
+        per_step = row["wall_seconds"] / row["steps"]
+        # strong: T(1) / (p T(p)); weak: T(1) / T(p).
+        row["efficiency"] = base / (row["ranks"] * per_step) if args.study == "strong" else base / per_step
+    print(f"\n{args.mode} {args.study} scaling ({rows[0]['steps']} timed steps after {rows[0]['pre_steps']})")
+    print(f"{'ranks':>5} {'nodes':>8} {'particles':>9} {'FE sub/step':>11} {'ms/step':>9} {'node-steps/s':>13} "
+          f"{'effic.':>7}")
+    for row in rows:
+        print(f"{row['ranks']:>5} {row['nodes']:>8} {row['particles']:>9} {row['fem_substeps_per_step']:>11} "
+              f"{1e3 * row['wall_seconds'] / row['steps']:>9.3f} {row['node_steps_per_second']:>13.3g} "
+              f"{100 * row['efficiency']:>6.1f}%")
+    return rows
+
+
 def launch(ranks: int, particles: int, args) -> dict:
     with tempfile.TemporaryDirectory(prefix="scaling-run-") as scratch:
         part = os.path.join(scratch, "run.json")
@@ -281,7 +321,12 @@ def plot(results: dict, path: Path) -> None:
 
 def parse_arguments(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--mode", choices=("strong", "weak", "both"), default="both")
+    parser.add_argument("--mode", choices=("strong", "weak", "both", "fem", "coupled"), default="both")
+    parser.add_argument("--study", choices=("strong", "weak"), default="strong",
+                        help="fem/coupled: strong (fixed size) or weak (size grows with the ranks)")
+    parser.add_argument("--columns", type=int, default=40, help="fem/coupled: plate cells along x (per rank, weak)")
+    parser.add_argument("--rows", type=int, default=20, help="fem/coupled: plate cells along y")
+    parser.add_argument("--layers", type=int, default=2, help="fem/coupled: plate cells through the thickness")
     parser.add_argument("--particles", type=int, default=200000, help="strong scaling: total particles")
     parser.add_argument("--per-rank", type=int, default=50000, help="weak scaling: particles per rank")
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
@@ -300,7 +345,12 @@ def parse_arguments(argv=None):
 def main(argv=None) -> int:
     args = parse_arguments(argv)
     if args.worker_json:
-        result = worker(args)
+        if args.mode in ("fem", "coupled"):
+            import scaling_solids
+
+            result = scaling_solids.worker(args)
+        else:
+            result = worker(args)
         if result:
             with open(args.worker_json, "w") as handle:
                 json.dump(result, handle)
@@ -310,6 +360,13 @@ def main(argv=None) -> int:
                            "load_average_1min_at_start": os.getloadavg()[0]},
                "scene": "benchmarks/scaling.py scene_dict (settle.py's scene)", "spacing": args.spacing,
                "steps": args.steps, "pre_steps": args.pre_steps}
+    if args.mode in ("fem", "coupled"):
+        results[f"{args.mode}_{args.study}"] = solids_study(args)
+        path = args.json if args.json != DEFAULT_JSON else DEFAULT_JSON.with_name(f"scaling_{args.mode}.json")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(results, indent=1))
+        print(f"\nwrote {path}")
+        return 0
     for mode in (("strong", "weak") if args.mode == "both" else (args.mode,)):
         results[mode] = study(mode, args)
         print_table(mode, results[mode])
