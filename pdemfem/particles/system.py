@@ -47,6 +47,14 @@ from pdemfem.particles.integrate import drift, kick
 
 log = logging.getLogger("pdemfem")
 
+# Load-balance weights (per owned particle, in units of a listed pair that is apart), estimated on the
+# settle scene's packed bed: the pair kernel takes 4.2 ms for 108,708 listed pairs of which 54,979 touch
+# (docs/performance.md), i.e. ~70 ns per touching pair if a distance test costs ~5 ns; a particle's own
+# share of the step (integration, list build, ghost update) is ~25 ns.  On the 28k settle scene on 2 ranks
+# these weights cut the faster rank's waiting from 2.0 to 0.5-0.8 s per 1500 steps (docs/parallel.md).
+PARTICLE_COST = 5.0
+CONTACT_COST = 12.0
+
 # Re-sort the owned particles by cell when more than this fraction is out of cell order.
 REORDER_FRACTION = 0.1
 
@@ -288,8 +296,21 @@ class ParticleSystem(kinds.StateComponent):
         self._pending_rebalance_log = None
 
     def _particle_costs(self) -> np.ndarray:
-        """Cost per owned particle: 1 + its listed pairs (the force loop's work)."""
-        return 1.0 + self._rows_per_particle()
+        """Cost per owned particle, in units of a listed pair that is apart (a distance test, ~5 ns):
+        PARTICLE_COST for its own step (integration, list build, ghosts), 1 per listed pair, and
+        CONTACT_COST more per touching pair (the contact law).  Without the contacts' weight a settling
+        bed cut horizontally looked balanced (listed pairs 1.07) while its lower rank held 5x the
+        contacts and did most of the work."""
+        state = self.state
+        costs = np.full(state.count, PARTICLE_COST)
+        if self.neighbors.pair_count and len(self.neighbors.row_particles) == state.count:
+            first, second = self.neighbors.pair_rows()
+            gap = state.radii[first] + state.radii[second]
+            touching = np.einsum("ij,ij->i", *(2 * [state.positions[first] - state.positions[second]])) < gap * gap
+            weights = 1.0 + CONTACT_COST * touching
+            costs += np.bincount(first, weights=weights, minlength=state.count)
+            costs += np.bincount(second, weights=weights, minlength=state.count)
+        return costs[:state.owned_count]
 
     def _rows_per_particle(self) -> np.ndarray:
         state = self.state
