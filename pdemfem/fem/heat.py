@@ -30,8 +30,8 @@ from pdemfem import state_dict as kinds
 from pdemfem.errors import SolverError
 from pdemfem.fem.assemble import owned_row_pattern
 from pdemfem.fem.config import ThermalConfig
-from pdemfem.fem.heat_kernels import (assemble_conductivity_rows, assemble_thermal_coupling_rows, explicit_heat_update,
-                                      face_node_areas)
+from pdemfem.fem.heat_kernels import assemble_conductivity_rows, assemble_thermal_coupling_rows, explicit_heat_update
+from pdemfem.fem.kernels import face_node_areas
 from pdemfem.fem.static import is_diagonal
 
 OPTIONS_PREFIX = "fem_heat_"

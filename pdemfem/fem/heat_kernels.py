@@ -1,4 +1,4 @@
-"""Numba kernels of the solid's heat conduction: conductivity rows, surface shares, the explicit update.
+"""Numba kernels of the solid's heat conduction: conductivity rows, thermal coupling, the explicit update.
 
 Same conventions as kernels.py: coords (n_local, 3), cells (n_cells, nen) in local node numbers,
 only owned rows (local number < n_owned) are written.
@@ -32,25 +32,6 @@ def assemble_conductivity_rows(coords, cells, n_owned, indptr, indices, stiff_gr
                 for b in range(nen):
                     pos = _find(indices, indptr[row], indptr[row + 1], cells[c, b])
                     values[pos] += wq * (g[a, 0] * g[b, 0] + g[a, 1] * g[b, 1] + g[a, 2] * g[b, 2])
-
-
-@njit(cache=True)
-def face_node_areas(coords, faces, n_owned, out):
-    """out[a] += int_face N_a dA over the faces, owned rows only: A/3 per corner of a 3-node face, A/3 per
-    midside (0 per corner) of a 6-node face (exact for straight-sided faces)."""
-    for f in range(faces.shape[0]):
-        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        e1 = coords[b] - coords[a]
-        e2 = coords[c] - coords[a]
-        nx = e1[1] * e2[2] - e1[2] * e2[1]
-        ny = e1[2] * e2[0] - e1[0] * e2[2]
-        nz = e1[0] * e2[1] - e1[1] * e2[0]
-        share = 0.5 * np.sqrt(nx * nx + ny * ny + nz * nz) / 3.0
-        first = 0 if faces.shape[1] == 3 else 3
-        for k in range(first, first + 3):
-            row = faces[f, k]
-            if row < n_owned:
-                out[row] += share
 
 
 @njit(cache=True)

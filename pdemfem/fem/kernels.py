@@ -194,8 +194,10 @@ def thermal_load(coords, cells, n_owned, n_owned_cells, mass_values, mass_grads,
 
 
 @njit(cache=True)
-def traction_load(coords, faces, n_owned, traction, out):
-    """Exact consistent load of a uniform traction: P1 faces give A/3 per corner, P2 faces A/3 per midside."""
+def face_node_areas(coords, faces, n_owned, out):
+    """out[a] += int_face N_a dA over the faces, owned rows only: A/3 per corner of a 3-node face, A/3 per
+    midside (0 per corner) of a 6-node face (exact for straight-sided faces).  A uniform traction's
+    consistent load is these shares times the traction; a uniform heat flux's, times the flux."""
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
         e1 = coords[b] - coords[a]
@@ -208,8 +210,7 @@ def traction_load(coords, faces, n_owned, traction, out):
         for k in range(first, first + 3):
             row = faces[f, k]
             if row < n_owned:
-                for d in range(3):
-                    out[row, d] += share * traction[d]
+                out[row] += share
 
 
 @njit(cache=True)

@@ -196,7 +196,9 @@ class Solid(kinds.StateComponent):
         body = self.density * np.asarray(gravity, dtype=float)
         kernels.body_force_load(mesh.points, mesh.cells, self.n_owned_nodes, self.element.mass_values, self.element.mass_weights, body, load)
         for entry in self.config.tractions:
-            kernels.traction_load(mesh.points, mesh.group_faces[entry.group], self.n_owned_nodes, np.asarray(entry.traction, float), load)
+            areas = np.zeros(self.n_owned_nodes)
+            kernels.face_node_areas(mesh.points, mesh.group_faces[entry.group], self.n_owned_nodes, areas)
+            load += areas[:, None] * np.asarray(entry.traction, float)
         self.constant_load_vec.setArray(load.ravel())
         if self.comm.rank == 0 and len(self.config.point_forces):
             forces = np.array([p.force for p in self.config.point_forces], dtype=float)
