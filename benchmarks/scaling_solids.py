@@ -85,7 +85,7 @@ def worker(args) -> dict:
         solid = sim.solids["plate"]
         nodes = comm.allreduce(solid.n_owned_nodes)
         particles = sim.particle_count()
-        substeps = sim.coupling.fem_substeps["plate"] if sim.particle_system.state.count or particles else 1
+        substeps = sim.coupling.fem_substeps["plate"]
     if comm.rank != 0:
         return {}
     return {"ranks": comm.size, "mode": args.mode, "study": args.study, "cells": [columns, args.rows, args.layers],

@@ -65,11 +65,11 @@ def total_energy(energies: dict) -> float:
 
 # Heat content (m c T, relative to 0 K) is orders of magnitude above the mechanical energies and
 # conserved on its own: it neither enters the bookkeeping total nor its round-off floor.
-_THERMAL = ("thermal_energy", "particle_thermal_energy")
+THERMAL_ENERGIES = ("thermal_energy", "particle_thermal_energy")
 
 
 def _mechanical_magnitude(energies: dict) -> float:
-    return sum(abs(value) for name, value in energies.items() if name not in _THERMAL)
+    return sum(abs(value) for name, value in energies.items() if name not in THERMAL_ENERGIES)
 
 
 class DivergenceMonitor:

@@ -25,6 +25,7 @@ from typing import Dict, List
 import numpy as np
 
 from pdemfem.errors import PdemfemError
+from pdemfem.monitor import THERMAL_ENERGIES
 
 __all__ = ["read_history", "plot_history"]
 
@@ -34,8 +35,6 @@ _REACTION = re.compile(r"^reaction_(.+)_([xyz])$")
 _DEFLECTION = re.compile(r"^max_displacement_(.+)$")
 _TEMPERATURE = re.compile(r"^temperature_(.+)_(min|mean|max)$")
 _HEAT = re.compile(r"^heat_(.+)$")
-# Heat content (m c T) is not a mechanical energy: it has its own figure.
-_THERMAL = ("thermal_energy", "particle_thermal_energy")
 
 
 def read_history(path) -> Dict[str, np.ndarray]:
@@ -126,12 +125,18 @@ def plot_history(outdir) -> List[Path]:
         pyplot.close(figure)
         written.append(target)
 
-    def titled(axes, title, note):
+    def finish(figure, axes, ylabel, title, note, name):
+        """Label a figure of curves over time (legend, grid, title with its constants note) and save it."""
+        axes.set_xlabel("time [s]")
+        axes.set_ylabel(ylabel)
         axes.set_title(title + (f"\n({note})" if note else ""), fontsize="medium")
+        axes.legend(fontsize="small")
+        axes.grid(alpha=0.3)
+        save(figure, name)
 
     fed_in = ("wall_work", "thermoelastic_work")  # work done on the system, subtracted from the total
     energies = [name for name in data if (name.endswith("_energy") or name in (*fed_in, "solid_load_potential"))
-                and name not in _THERMAL]
+                and name not in THERMAL_ENERGIES]  # heat content has its own figure (heat.png)
     varying = [name for name in energies if not is_constant(data[name])]
     if varying:
         figure, axes = pyplot.subplots(figsize=(7, 4.5))
@@ -142,12 +147,7 @@ def plot_history(outdir) -> List[Path]:
             total = (sum(data[name] for name in energies if name not in fed_in)
                      - sum(data.get(name, 0.0) for name in fed_in))
             axes.plot(time, total, "k--", label="total (conserved up to integration error)")
-        axes.set_xlabel("time [s]")
-        axes.set_ylabel("energy [J]")
-        titled(axes, "energies", _constant_note(data, energies, " J"))
-        axes.legend(fontsize="small")
-        axes.grid(alpha=0.3)
-        save(figure, "energies.png")
+        finish(figure, axes, "energy [J]", "energies", _constant_note(data, energies, " J"), "energies.png")
 
     means = _vector_columns(data, _MEAN_FORCE)
     walls = means or _vector_columns(data, _WALL_FORCE)
@@ -163,15 +163,10 @@ def plot_history(outdir) -> List[Path]:
         for solid, column in deflections.items():
             if not is_constant(data[column]):
                 axes.plot(time, 1e3 * data[column], label=solid)
-        axes.set_xlabel("time [s]")
-        axes.set_ylabel("largest displacement [mm]")
-        titled(axes, "deflection of each solid (largest nodal displacement)",
-               _constant_note(data, list(deflections.values()), " m"))
-        axes.legend(fontsize="small")
-        axes.grid(alpha=0.3)
-        save(figure, "deflections.png")
+        finish(figure, axes, "largest displacement [mm]", "deflection of each solid (largest nodal displacement)",
+               _constant_note(data, list(deflections.values()), " m"), "deflections.png")
 
-    _temperature_figures(pyplot, save, titled, time, data)
+    _temperature_figures(pyplot, finish, time, data)
 
     counts = [name for name in ("particles", "contacts") if name in data]
     varying = [name for name in counts if not is_constant(data[name])]
@@ -180,16 +175,12 @@ def plot_history(outdir) -> List[Path]:
         colors = {"particles": "tab:blue", "contacts": "tab:orange"}
         for name in varying:
             axes.plot(time, data[name], color=colors[name], label=name)
-        axes.set_xlabel("time [s]")
-        axes.set_ylabel("count")
-        titled(axes, "particle and contact count", _constant_note(data, counts, ""))
-        axes.legend(fontsize="small")
-        axes.grid(alpha=0.3)
-        save(figure, "particles.png")
+        finish(figure, axes, "count", "particle and contact count", _constant_note(data, counts, ""),
+               "particles.png")
     return written
 
 
-def _temperature_figures(pyplot, save, titled, time, data) -> None:
+def _temperature_figures(pyplot, finish, time, data) -> None:
     """temperatures.png: each body's min / mean / max temperature; heat.png: the heat each wall or solid gave
     the particles (cumulative) beside the change of the heat content, which it balances."""
     bodies: Dict[str, Dict[str, str]] = {}
@@ -206,12 +197,7 @@ def _temperature_figures(pyplot, save, titled, time, data) -> None:
             if "min" in columns and "max" in columns:
                 axes.fill_between(time, data[columns["min"]], data[columns["max"]], color=color, alpha=0.2,
                                   label=f"{body} (min to max)")
-        axes.set_xlabel("time [s]")
-        axes.set_ylabel("temperature [K]")
-        titled(axes, "temperatures", "")
-        axes.legend(fontsize="small")
-        axes.grid(alpha=0.3)
-        save(figure, "temperatures.png")
+        finish(figure, axes, "temperature [K]", "temperatures", "", "temperatures.png")
     flows = {match.group(1): column for column in data if (match := _HEAT.match(column))}
     if any(not is_constant(data[column]) for column in flows.values()):
         figure, axes = pyplot.subplots(figsize=(7, 4.5))
@@ -220,12 +206,7 @@ def _temperature_figures(pyplot, save, titled, time, data) -> None:
         if "particle_thermal_energy" in data:
             gained = data["particle_thermal_energy"] - data["particle_thermal_energy"][0]
             axes.plot(time, gained, "k--", label="particles' heat content change")
-        axes.set_xlabel("time [s]")
-        axes.set_ylabel("heat [J]")
-        titled(axes, "heat given to the particles (cumulative)", "")
-        axes.legend(fontsize="small")
-        axes.grid(alpha=0.3)
-        save(figure, "heat.png")
+        finish(figure, axes, "heat [J]", "heat given to the particles (cumulative)", "", "heat.png")
 
 
 def _vector_figure(pyplot, save, time, data, vectors, title, symbol, unit, name) -> None:

@@ -423,7 +423,7 @@ class Simulation:
         # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
         energies["solid_load_potential"] = -sum(solid.constant_load_vec.dot(solid.displacement_vec)
                                                 for solid in self.solids.values())
-        conducting = [solid for solid in self.solids.values() if getattr(solid, "heat", None) is not None]
+        conducting = [self.solids[name] for name in self._conducting_solids()]
         if conducting:
             # Strain energy the thermal load's refreshes put in (work fed in, like a moving wall's).
             energies["thermoelastic_work"] = sum(solid.thermoelastic_work for solid in conducting)
@@ -431,8 +431,7 @@ class Simulation:
             # Heat content m c T [J] (relative to 0 K) of the particles, and of the solids that conduct.
             particle_heat = self.particle_system.thermal_energy
             energies["particle_thermal_energy"] = particle_heat
-            energies["thermal_energy"] = particle_heat + sum(
-                solid.thermal_energy() for solid in self.solids.values() if getattr(solid, "heat", None) is not None)
+            energies["thermal_energy"] = particle_heat + sum(solid.thermal_energy() for solid in conducting)
         if self.streams is not None or self.outlets is not None:
             # Energy the inserted particles brought in minus what the outlets took out (docs/streams.md).
             energies["stream_energy"] = ((self.streams.energy_in if self.streams is not None else 0.0)
@@ -446,7 +445,7 @@ class Simulation:
         return {f"heat_{name}": float(value) for name, value in zip(ledger.names, ledger.settle(self.comm))}
 
     def _conducting_solids(self) -> list:
-        return [name for name, solid in self.solids.items() if getattr(solid, "heat", None) is not None]
+        return [name for name, solid in self.solids.items() if solid.heat is not None]
 
     def temperature_statistics(self) -> dict:
         """Collective: temperature_<body>_min/_mean/_max [K] of the particles (mean weighted by m c, so it is
