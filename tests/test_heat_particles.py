@@ -281,3 +281,37 @@ def test_history_columns_and_plots_of_a_heated_run(tmp_path):
         last = sorted(name for name in handle if name.startswith("step_"))[-1]
         order = np.argsort(handle[last]["ids"][()])
         assert np.array_equal(handle[last]["temperature"][()][order], _temperatures_by_id(sim))
+
+
+@pytest.mark.parametrize("kind", ["mesh", "cylinder"])
+def test_mesh_and_cylinder_walls_conduct_as_the_plane(tmp_path, kind):
+    """A sphere resting on a hot flat mesh floor, or at the bottom of a hot horizontal drum (taken flat, R* = r,
+    as the cylinder's contact law does), heats exactly as on the plane floor: the same overlap, the same
+    conductance, so the same temperatures to round-off (mesh: the flat patch is the plane's distance; the
+    drum's bottom point: its distance differs from the plane's by the round-off of the radius arithmetic)."""
+    radius = 1.0e-3
+    plane, _ = _stack_scene(radius, 0.7e-3, floor_temperature=500.0)
+    plane["particles"] = plane["particles"][:1]
+    other, _ = _stack_scene(radius, 0.7e-3, floor_temperature=500.0)
+    other["particles"] = other["particles"][:1]
+    if kind == "mesh":
+        (tmp_path / "floor.stl").write_text(
+            "solid floor\nfacet normal 0 0 1\nouter loop\nvertex -0.01 -0.01 0\nvertex 0.01 -0.01 0\nvertex 0.01 0.01 0\n"
+            "endloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex -0.01 -0.01 0\nvertex 0.01 0.01 0\n"
+            "vertex -0.01 0.01 0\nendloop\nendfacet\nendsolid floor\n")
+        other["walls"] = [{"name": "floor", "kind": "mesh", "material": "floor", "file": str(tmp_path / "floor.stl"),
+                           "temperature": 500.0}]
+        tolerance = 0.0  # the same numbers in the same order
+    else:
+        drum = 0.05
+        other["walls"] = [{"name": "floor", "kind": "cylinder", "material": "floor", "radius": drum, "inside": True,
+                           "axis": {"point": [0.0, 0.0, drum], "direction": [0.0, 1.0, 0.0]}, "temperature": 500.0}]
+        tolerance = 1e-9 * 200.0  # distance drum - |rho| rounds at ~1e-16 m of 1e-7 m overlaps: 1e-9 relative
+    results = []
+    for scene in (plane, other):
+        sim = Simulation.from_dict(scene, base_dir=tmp_path)
+        sim.step(2000)
+        results.append((sim.particles.temperatures[0], sim.heat_given()["heat_floor"]))
+    assert results[0][0] > 300.0 + 1.0  # it heated: not a 0 == 0 comparison
+    assert abs(results[1][0] - results[0][0]) <= tolerance
+    assert results[1][1] == pytest.approx(results[0][1], rel=tolerance / 200.0 + 1e-15)

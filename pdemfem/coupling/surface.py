@@ -59,6 +59,7 @@ class CoupledSurface(kinds.StateComponent):
         # Heat: only when the solid conducts (Solid.heat); the particles' side decides whether contacts conduct.
         self.conducting = getattr(solid, "heat", None) is not None
         if self.conducting:
+            self.triangle_surface.vertex_heat = np.zeros(len(self.node_indices))
             self.refresh_temperatures()
 
     def collect_contact_forces(self, keep_dampers: bool = True) -> None:

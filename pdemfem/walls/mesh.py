@@ -186,10 +186,11 @@ class TriangleSurface(ContributorWall):
         self.slots = int(slots)
         self.spread_to_vertices = bool(spread_to_vertices)
         self.vertex_forces = np.zeros_like(self.vertices)
-        # With heat on: the surface temperature [K] at each vertex (empty: adiabatic), and the heat [J] the
-        # contacts sent into each vertex since it was last cleared (a solid's coupling takes it).
+        # With heat on: the surface temperature [K] at each vertex (empty: adiabatic), and, when the surface
+        # is a solid's (its coupling takes it; a rigid wall's is empty: not collected), the heat [J] the
+        # contacts sent into each vertex since it was last cleared.
         self.vertex_temperatures = np.zeros(0)
-        self.vertex_heat = np.zeros(len(self.vertices))
+        self.vertex_heat = np.zeros(0)
         self.bvh = BVH(self.vertices, self.triangles)
         self.list_builds = 0
         self.contact_count = 0

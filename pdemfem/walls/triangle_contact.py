@@ -315,8 +315,8 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
 
     With heat on (composition) and vertex temperatures given (an empty array: adiabatic), a contact
     conducts to the surface temperature at its point, interpolated by the barycentric weights, and its
-    heat goes to the triangle's vertices by the same weights (vertex_heat += weight x flow x dt [J]): the
-    particle's heat and the vertices' balance exactly.
+    heat goes to the triangle's vertices by the same weights (vertex_heat += weight x flow x dt [J], when
+    vertex_heat is not empty): the particle's heat and the vertices' balance exactly.
 
     totals[0:3] += force on the wall, totals[3:6] += its moment about the origin
     (sum of q x F_wall minus the rolling couples).  One record per contact
@@ -598,9 +598,10 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 heat_flows[i, 0] += flow
                 heat_flows[i, 1] += conductance
                 heat += flow * dt
-                vertex_heat[a] -= wa * flow * dt
-                vertex_heat[b] -= wb * flow * dt
-                vertex_heat[c] -= wc * flow * dt
+                if vertex_heat.shape[0] > 0:
+                    vertex_heat[a] -= wa * flow * dt
+                    vertex_heat[b] -= wb * flow * dt
+                    vertex_heat[c] -= wc * flow * dt
             elastic_total += elastic
             dissipated_total += dissipated
             work += (fx * sx + fy * sy + fz * sz) * dt
