@@ -16,7 +16,7 @@ statement of physics (docs/stability.md lists them):
    (`Simulation.step` stops at once on the displacement the step computes anyway).
 4. Energy created: the bookkeeping total (kinetic + rotational + potential + elastic +
    dissipated - wall work + the solids' kinetic, strain and load potential - the stream energy
-   of inserted minus removed particles) is conserved
+   of inserted minus removed particles - the work of solids' prescribed rigid motions) is conserved
    by the equations; a stable explicit step errs by a fraction of the energy that moves.
    The run stops when the total has grown by more than all the energy the scene has had
    available since the baseline: its kinetic, rotational, elastic and solid energies at
@@ -60,7 +60,7 @@ def total_energy(energies: dict) -> float:
             + energies["elastic_energy"] + energies["dissipated_energy"] - energies["wall_work"]
             + energies.get("solid_kinetic_energy", 0.0) + energies.get("solid_strain_energy", 0.0)
             + energies.get("solid_load_potential", 0.0) - energies.get("thermoelastic_work", 0.0)
-            - energies.get("stream_energy", 0.0))
+            - energies.get("stream_energy", 0.0) - energies.get("frame_work", 0.0))
 
 
 # Heat content (m c T, relative to 0 K) is orders of magnitude above the mechanical energies and
@@ -132,6 +132,7 @@ class DivergenceMonitor:
             "potential": _potential(energies),
             "wall_work": energies["wall_work"],
             "thermoelastic_work": energies.get("thermoelastic_work", 0.0),
+            "frame_work": energies.get("frame_work", 0.0),
             "stream_energy": energies.get("stream_energy", 0.0),
             "lost": system.lost_particles,
             "step": self.sim.step_count,
@@ -197,6 +198,7 @@ class DivergenceMonitor:
         available = (baseline["stored"] + (baseline["potential"] - self.lowest_potential)
                      + abs(energies["wall_work"] - baseline["wall_work"])
                      + abs(energies.get("thermoelastic_work", 0.0) - baseline["thermoelastic_work"])
+                     + abs(energies.get("frame_work", 0.0) - baseline["frame_work"])
                      + abs(energies.get("stream_energy", 0.0) - baseline["stream_energy"]))
         created = total_energy(energies) - baseline["total"]
         floor = ROUND_OFF * max(baseline["magnitude"], _mechanical_magnitude(energies))

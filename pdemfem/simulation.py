@@ -300,6 +300,8 @@ class Simulation:
             columns += ["solid_kinetic_energy", "solid_strain_energy", "solid_load_potential"]
         if self._conducting_solids():
             columns += ["thermoelastic_work"]
+        if self._moving_solids():
+            columns += ["frame_work"]
         if self.particle_system.heat:
             columns += ["thermal_energy", "particle_thermal_energy"]
             columns += [f"heat_{name}" for name in self.particle_system.heat_ledger.names]
@@ -423,6 +425,11 @@ class Simulation:
         # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
         energies["solid_load_potential"] = -sum(solid.constant_load_vec.dot(solid.displacement_vec)
                                                 for solid in self.solids.values())
+        if self._moving_solids():
+            # Work the solids' prescribed rigid motions fed in (fem/frame.py): through their frames' loads on the
+            # elastic motion, and through their surfaces on the particles.
+            energies["frame_work"] = (sum(solid.frame_work for solid in self.solids.values())
+                                      + sum(surface.frame_work() for surface in self.coupled_surfaces))
         conducting = [self.solids[name] for name in self._conducting_solids()]
         if conducting:
             # Strain energy the thermal load's refreshes put in (work fed in, like a moving wall's).
@@ -443,6 +450,9 @@ class Simulation:
         start (negative: the particles heated it)."""
         ledger = self.particle_system.heat_ledger
         return {f"heat_{name}": float(value) for name, value in zip(ledger.names, ledger.settle(self.comm))}
+
+    def _moving_solids(self) -> list:
+        return [name for name, solid in self.solids.items() if solid.frame is not None]
 
     def _conducting_solids(self) -> list:
         return [name for name, solid in self.solids.items() if solid.heat is not None]

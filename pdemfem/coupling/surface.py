@@ -16,6 +16,13 @@ heat the particles lose is what the solid's nodes receive, to round-off.
 The contacts' dashpots are not part of that held load: the solid applies them to its
 surface nodes at every FE sub-step and the particles get the balancing impulse after the
 advance (pdemfem.coupling.dampers explains why and how momentum stays exact).
+
+A solid with a prescribed rigid motion (fem/frame.py) is mirrored in world axes.  Each advance's
+surface displacement splits into the frame's part and the elastic part R(T) du (R(T) the frame's
+orientation when the window's forces were turned into it): the particles' forces times minus the frame
+part is the work the frame fed in (`frame_work_local`, booked like a moving wall's), the elastic part
+is the solid's own business.  The dashpot records and their balance use velocities relative to the
+frame's material, as the conveyor's use the belt's.
 """
 from __future__ import annotations
 
@@ -58,6 +65,11 @@ class CoupledSurface(kinds.StateComponent):
         self.dissipation_correction_local = 0.0  # [J], this rank's contacts (dampers.balance_particles)
         # Heat: only when the solid conducts (Solid.heat); the particles' side decides whether contacts conduct.
         self.conducting = getattr(solid, "heat", None) is not None
+        self.frame = getattr(solid, "frame", None)
+        if self.frame is not None:
+            self.frame_work_local = 0.0  # [J] this rank's contacts: work the moving frame did on the particles
+            self._window_forces = None
+            self.refresh_vertices()
         if self.conducting:
             self.triangle_surface.vertex_heat = np.zeros(len(self.node_indices))
             self.refresh_temperatures()
@@ -71,6 +83,8 @@ class CoupledSurface(kinds.StateComponent):
                                    contacts.triangle, contacts.weights, contacts.damping)
             if len(records) and np.any(self.triangle_surface.transport_velocity):
                 self._remove_transport(records)
+            if len(records) and self.frame is not None:
+                self._remove_frame_velocity(records)
             if len(records):
                 self.damper_records.append(records)
         self.node_forces[:] = 0.0
@@ -95,12 +109,24 @@ class CoupledSurface(kinds.StateComponent):
         records[:, RECORD_DAMPING + 6:RECORD_DAMPING + 9] -= tangential
         records[:, RECORD_DAMPING + 9:RECORD_DAMPING + 12] -= tangential
 
+    def _remove_frame_velocity(self, records) -> None:
+        """Moving frame: the records' particle and surface velocities relative to the frame's material at the
+        contact point (interpolated by the contact's weights), so the nodal dashpots act on the elastic
+        velocity and the particles' balance stays exact (see the module docstring)."""
+        triangles = records[:, RECORD_TRIANGLE].astype(np.int64)
+        weights = records[:, RECORD_WEIGHTS:RECORD_WEIGHTS + 3]
+        frame = np.einsum("nk,nkd->nd", weights, self._frame_vertex_velocities[self.triangles[triangles]])
+        records[:, RECORD_DAMPING + 6:RECORD_DAMPING + 9] -= frame
+        records[:, RECORD_DAMPING + 9:RECORD_DAMPING + 12] -= frame
+
     def send_forces_to_solid(self, scale: float, dampers: bool = True) -> None:
         """Add scale x the accumulated forces to the solid's nodal loads (ADD_VALUES to the owners).
 
         dampers: the kept contacts' dashpots go to the solid as nodal dashpots (scaled alike) and leave
         the held load; without, the held load keeps them (the prime, whose impulse is F^0 dt exactly)."""
         forces = scale * self.accumulated_forces
+        if self.frame is not None:
+            self._window_forces = forces.copy()  # the whole contact force: the frame's work (refresh_vertices)
         records = np.concatenate(self.damper_records) if self.damper_records else np.zeros((0, RECORD_COLUMNS))
         self.damper_records = []
         self._advanced_records = records if dampers else records[:0]
@@ -152,8 +178,10 @@ class CoupledSurface(kinds.StateComponent):
                 local_index = np.concatenate([local_index[local_index >= 0],
                                               self._local_index(shared, state, by_id_only=True)])
         if len(records):
+            vertex_velocities = (self.triangle_surface.vertex_velocities if self.frame is None
+                                 else self._relative_vertex_velocities)
             self.dissipation_correction_local += balance_particles(
-                records, local_index, self.triangles, self.triangle_surface.vertex_velocities, dt,
+                records, local_index, self.triangles, vertex_velocities, dt,
                 state.velocities, state.angular_velocities, state.mass, state.inverse_inertia)
 
     @staticmethod
@@ -210,7 +238,21 @@ class CoupledSurface(kinds.StateComponent):
         state = {"accumulated_forces": kinds.global_array(total), "damper_records": kinds.global_array(records)}
         if self.conducting:
             state["accumulated_heat"] = kinds.global_array(heat)
+        if self.frame is not None:
+            state["frame_work"] = kinds.scalar(float(self.frame_work()))
+            state["frame_vertex_velocities"] = kinds.global_array(self._frame_vertex_velocities)
+            state["relative_vertex_velocities"] = kinds.global_array(self._relative_vertex_velocities)
         return state
+
+    def frame_work(self) -> float:
+        """Collective: work [J] the moving frame did on the particles through this surface (all ranks), kept on
+        rank 0 from here on; 0 without motion."""
+        if self.frame is None:
+            return 0.0
+        comm = self.solid.comm
+        total = comm.allreduce(self.frame_work_local, op=MPI.SUM) if comm.size > 1 else self.frame_work_local
+        self.frame_work_local = total if comm.rank == 0 else 0.0
+        return float(total)
 
     def load_state_dict(self, state: dict) -> None:
         """After the solid's state: its surface positions mirrored; the window's sums kept on rank 0
@@ -220,6 +262,12 @@ class CoupledSurface(kinds.StateComponent):
         self.accumulated_forces[:] = np.asarray(state["accumulated_forces"]) if comm.rank == 0 else 0.0
         self.restore_records(state["damper_records"], comm)
         self.dissipation_correction_local = 0.0
+        if (self.frame is not None) != ("frame_work" in state):
+            raise kinds.StateMismatch(f"solid '{self.name}': motion: differs between this scene and the checkpoint")
+        if self.frame is not None:
+            self.frame_work_local = float(state["frame_work"]) if comm.rank == 0 else 0.0
+            self._frame_vertex_velocities = np.array(state["frame_vertex_velocities"], dtype=float)
+            self._relative_vertex_velocities = np.array(state["relative_vertex_velocities"], dtype=float)
         if self.conducting:
             if "accumulated_heat" not in state:
                 raise kinds.StateMismatch(f"solid '{self.name}': the checkpoint holds no surface heat (written "
@@ -239,13 +287,41 @@ class CoupledSurface(kinds.StateComponent):
     def remember_positions(self) -> None:
         """Keep the mirrored positions before an advance (for the mean surface velocity over it)."""
         self._positions_before = self.triangle_surface.vertices.copy()
+        if self.frame is not None:
+            self._body_before = self._body_positions.copy()
+            self._time_before = self.solid.time
 
     def refresh_vertices(self, interval=None) -> None:
         """Collective: mirror the solid's current surface positions, and as velocities the mean over the
         last advance of length `interval` (the displacement increment / interval: the velocity at the
         particles' half step, see driver.py); interval None: the solid's own half-step velocities."""
+        if self.frame is not None:
+            self._refresh_moving_frame(interval)
+            return
         _, positions, velocities = self.solid.surface_state()
         if interval is not None and getattr(self, "_positions_before", None) is not None:
             velocities = (positions - self._positions_before) / interval
+        self.triangle_surface.set_vertices(positions, velocities)
+
+    def _refresh_moving_frame(self, interval) -> None:
+        """refresh_vertices of a solid with motion: world positions, the chord velocities split into the
+        frame's and the elastic part, and the frame's work on the particles over the advance."""
+        solid = self.solid
+        body_positions, body_velocities = solid.contact_surface().gather(solid.displacement_vec, solid.velocity_vec)
+        positions, velocities = solid.frame_to_world(body_positions, body_velocities)
+        if interval is not None and getattr(self, "_positions_before", None) is not None:
+            displacement = positions - self._positions_before
+            elastic = (body_positions - self._body_before) @ self.frame.rotation(self._time_before).T
+            frame_part = displacement - elastic
+            velocities = displacement / interval
+            self._frame_vertex_velocities = frame_part / interval
+            self._relative_vertex_velocities = elastic / interval
+            if self._window_forces is not None:
+                self.frame_work_local -= float(np.sum(self._window_forces * frame_part))
+                self._window_forces = None
+        else:
+            self._frame_vertex_velocities = self.frame.frame_velocities(positions, solid.time)
+            self._relative_vertex_velocities = velocities - self._frame_vertex_velocities
+        self._body_positions = body_positions
         self.triangle_surface.set_vertices(positions, velocities)
 

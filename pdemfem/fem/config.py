@@ -148,6 +148,16 @@ class RegionConfig(StrictModel):
         return self
 
 
+class MotionConfig(StrictModel):
+    """A prescribed rigid motion carrying the solid (rotation about an axis plus translation, both constant);
+    the solid deforms elastically (small strain) relative to this moving frame (docs/fem.md)."""
+
+    axis_point: Vector3 = Field(description="a point of the rotation axis at t = 0 [m] (e.g. the wheel's hub centre)")
+    angular_velocity: Vector3 = Field(
+        (0.0, 0.0, 0.0), description="rotation vector [rad/s]: the axis direction times the spin rate (right-handed)")
+    velocity: Vector3 = Field((0.0, 0.0, 0.0), description="translation velocity of the axis [m/s]")
+
+
 class SolidConfig(StrictModel):
     name: str = Field(description="unique solid name (shares one namespace with the walls)")
     mesh: Union[str, BoxMeshConfig] = Field(
@@ -167,6 +177,9 @@ class SolidConfig(StrictModel):
     transport_velocity: Vector3 = Field(
         (0.0, 0.0, 0.0), description="conveyor: the contact surface's material moves with this velocity [m/s] "
                                      "(its part along the contact's tangent plane) while the mesh stays")
+    motion: Optional[MotionConfig] = Field(
+        None, description="prescribed rigid motion (rotation + translation) the solid deforms relative to "
+                          "(a rolling wheel or tread); needs mass: lumped")
     tractions: List[TractionConfig] = Field(default_factory=list, description="constant surface tractions")
     point_forces: List[PointForceConfig] = Field(default_factory=list, description="constant nodal forces")
     initial_temperature: Optional[PositiveFloat] = Field(
@@ -185,6 +198,13 @@ class SolidConfig(StrictModel):
         clash = sorted(set(self.fixed) & set(prescribed))
         if clash:
             raise ValueError(f"groups {clash} are both fixed and prescribed; keep each group in one list")
+        if self.motion is not None:
+            if self.mass != "lumped":
+                raise ValueError("motion: needs mass: lumped (the frame's inertial forces are applied per node with "
+                                 "the lumped mass); set mass: lumped")
+            if any(self.transport_velocity):
+                raise ValueError("motion: and transport_velocity: cannot be combined (the moving frame already moves "
+                                 "the surface); remove transport_velocity")
         faces = sorted(set(self.regions) & set(BOX_FACES))
         if faces:
             raise ValueError(f"regions {faces} are named like box faces; choose another name")

@@ -27,6 +27,8 @@ from pdemfem.fem import kernels
 from pdemfem.fem.assemble import assemble_operators, ghosted_vector, local_values
 from pdemfem.fem.config import SolidConfig, ThermalConfig
 from pdemfem.fem.elements import reference_element
+from pdemfem.fem.frame import (MovingFrame, centrifugal_reference_load, coriolis_correction, frame_load,
+                               load_work)
 from pdemfem.fem.mesh import load_mesh
 from pdemfem.fem.partition import distribute_mesh
 from pdemfem.fem.stability import critical_step, largest_element_eigenvalue
@@ -92,6 +94,10 @@ class Solid(kinds.StateComponent):
         self.element = reference_element(config.element)
         self.lumped = config.mass == "lumped"
         self.damping_alpha, self.damping_beta = config.damping.alpha, config.damping.beta
+        motion = getattr(config, "motion", None)
+        # A prescribed rigid motion the solid deforms relative to (frame.py); None: a fixed frame.
+        self.frame = (MovingFrame(motion.axis_point, motion.angular_velocity, motion.velocity)
+                      if motion is not None else None)
 
         thermal = config.thermal if config.thermal is not None else (ThermalConfig() if heat else None)
         if thermal is not None:
@@ -139,6 +145,17 @@ class Solid(kinds.StateComponent):
         self.coordinates_vec = self.stiffness.createVecRight()
         self.coordinates_vec.setArray(mesh.points[: self.n_owned_nodes].ravel())
         self.temperature_vec = ghosted_vector(comm, mesh, 1)
+        if self.frame is not None:
+            self._frame_load_vec = self.stiffness.createVecRight()  # gravity turned into the frame + centrifugal
+            self._frame_base_vec = self.stiffness.createVecRight()  # base load + frame load of the step
+            self._centrifugal_reference = np.zeros(3 * self.n_owned_nodes)
+            centrifugal_reference_load(mesh.points, mesh.cells, self.n_owned_nodes, self.element.mass_values,
+                                       self.element.mass_weights, self.density, self.frame.angular_velocity,
+                                       self.frame.axis_point, self._centrifugal_reference)
+            # Work the frame fed into the elastic motion through its loads, this rank's since the last reading,
+            # and the sum over the ranks up to it [J] (frame.py: contact work is booked by the coupled surface).
+            self.frame_work_local = 0.0
+            self._frame_work_summed = 0.0
 
         self._constrained = np.zeros(3 * self.n_owned_nodes, dtype=np.bool_)
         self._prescribed_displacement = np.zeros(3 * self.n_owned_nodes)
@@ -193,8 +210,18 @@ class Solid(kinds.StateComponent):
         """Collective: rebuild the constant load (gravity, tractions, point forces) for a new gravity vector."""
         mesh = self.mesh
         load = np.zeros((self.n_owned_nodes, 3))
-        body = self.density * np.asarray(gravity, dtype=float)
-        kernels.body_force_load(mesh.points, mesh.cells, self.n_owned_nodes, self.element.mass_values, self.element.mass_weights, body, load)
+        if self.frame is None:
+            body = self.density * np.asarray(gravity, dtype=float)
+            kernels.body_force_load(mesh.points, mesh.cells, self.n_owned_nodes, self.element.mass_values,
+                                    self.element.mass_weights, body, load)
+        else:
+            # Gravity turns in the moving frame: keep the nodal loads of a unit density force along each axis.
+            self._gravity_unit_loads = np.zeros((3, 3 * self.n_owned_nodes))
+            for axis in range(3):
+                unit = np.zeros((self.n_owned_nodes, 3))
+                kernels.body_force_load(mesh.points, mesh.cells, self.n_owned_nodes, self.element.mass_values,
+                                        self.element.mass_weights, self.density * np.eye(3)[axis], unit)
+                self._gravity_unit_loads[axis] = unit.ravel()
         for entry in self.config.tractions:
             areas = np.zeros(self.n_owned_nodes)
             kernels.face_node_areas(mesh.points, mesh.group_faces[entry.group], self.n_owned_nodes, areas)
@@ -233,9 +260,13 @@ class Solid(kinds.StateComponent):
         self._thermal_energy = _sum(self.comm, energy)
 
     def add_nodal_forces(self, global_node_indices, forces) -> None:
-        """Not collective: add forces (n, 3) [N] on nodes of any rank; applied in the next step (or static solve), then cleared."""
+        """Not collective: add forces (n, 3) [N] on nodes of any rank; applied in the next step (or static solve), then cleared.
+
+        World components; a solid with motion: turns them into its frame as it stands now (self.time)."""
         indices = np.asarray(global_node_indices, dtype=PETSc.IntType).ravel()
         forces = np.ascontiguousarray(forces, dtype=float).reshape(len(indices), 3)
+        if self.frame is not None and len(indices):
+            forces = np.ascontiguousarray(self.frame.vectors_to_body(forces, self.time))
         if len(indices):
             self.nodal_force_vec.setValuesBlocked(indices, forces.ravel(), PETSc.InsertMode.ADD_VALUES)
 
@@ -273,8 +304,12 @@ class Solid(kinds.StateComponent):
 
         The dashpot force on node k is g_k - D_k v_k with D_k (n, 6) symmetric (xx, yy, zz, yz, xz, xy)
         [N s/m] and g_k (n, 3) [N]; it is integrated implicitly at every FE sub-step
-        (kernels.apply_contact_dampers)."""
+        (kernels.apply_contact_dampers).  World components; a solid with motion turns D and g into its
+        frame (the velocity they act on is then the elastic velocity relative to the frame)."""
         indices = np.asarray(global_node_indices, dtype=PETSc.IntType).ravel()
+        if len(indices) and self.frame is not None:
+            tensors = self.frame.symmetric_to_body(np.asarray(tensors, float).reshape(-1, 6), self.time)
+            targets = self.frame.vectors_to_body(np.asarray(targets, float).reshape(-1, 3), self.time)
         if len(indices):
             values = np.hstack([np.asarray(tensors, float).reshape(-1, 6), np.asarray(targets, float).reshape(-1, 3)])
             self.damper_vec.setValuesBlocked(indices, values.ravel(), PETSc.InsertMode.ADD_VALUES)
@@ -334,6 +369,9 @@ class Solid(kinds.StateComponent):
             constrained.zeroRowsColumns(self._constrained_rows(), 1.0)
             self._static_solver = make_static_solver(constrained, self.coordinates_vec)
         self._gather_loads()
+        if self.frame is not None:
+            self._compute_frame_load()
+            self.load_vec.axpy(1.0, self._frame_load_vec)
         prescribed = self.velocity_vec.duplicate()
         prescribed.setArray(np.where(self._constrained, self._prescribed_displacement, 0.0))
         rhs = self.load_vec.duplicate()
@@ -431,7 +469,20 @@ class Solid(kinds.StateComponent):
                 fix="lower time.dt, refine less, or let the coupling sub-cycle the solid (Solid.advance)",
             )
 
+    def _compute_frame_load(self) -> None:
+        """The frame's loads at the current time and displacement (frame.frame_load) into _frame_load_vec."""
+        frame = self.frame
+        body_gravity = frame.vectors_to_body(np.asarray(self.gravity, float)[None, :], self.time)[0]
+        frame_load(self.displacement_vec.getArray(readonly=True), self._lumped_mass_values, self._centrifugal_reference,
+                   self._gravity_unit_loads, body_gravity, frame.angular_velocity, self._frame_load_vec.getArray())
+
     def _advance(self, dt: float, clear_nodal: bool) -> None:
+        base_load = self._base_load_vec
+        if self.frame is not None:
+            velocity_before = self.velocity_vec.getArray(readonly=True).copy()
+            self._compute_frame_load()
+            self._frame_base_vec.waxpy(1.0, self._base_load_vec, self._frame_load_vec)
+            base_load = self._frame_base_vec
         if self.damping_beta != 0.0:
             self._work_vec.waxpy(self.damping_beta, self.velocity_vec, self.displacement_vec)
             self.stiffness.mult(self._work_vec, self.internal_force_vec)
@@ -446,7 +497,7 @@ class Solid(kinds.StateComponent):
         # in place, and nothing reads a cached norm in between, so no copies are needed.
         work = kernels.central_difference_update(
             self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
-            self.internal_force_vec.getArray(readonly=True), self._base_load_vec.getArray(readonly=True),
+            self.internal_force_vec.getArray(readonly=True), base_load.getArray(readonly=True),
             self.nodal_force_vec.getArray(), self.load_vec.getArray(), self._inverse_lumped_mass, self._constrained,
             self._prescribed_velocity, dt, decay, gain, self.lumped, clear_nodal,
         )
@@ -454,6 +505,12 @@ class Solid(kinds.StateComponent):
             self.damper_work_local += kernels.apply_contact_dampers(
                 self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
                 self._lumped_mass_values, self._constrained, self._damped_nodes, self._dampers, dt, decay, gain)
+        if self.frame is not None:
+            velocities = self.velocity_vec.getArray()
+            coriolis_correction(self.displacement_vec.getArray(), velocities, velocity_before, self._constrained,
+                                self.frame.angular_velocity, dt)
+            self.frame_work_local += load_work(self._frame_load_vec.getArray(readonly=True), velocity_before,
+                                               self.velocity_vec.getArray(readonly=True), self._constrained, dt)
         self._external_work_local += work
         self.time += dt
         self.step_count += 1
@@ -511,9 +568,34 @@ class Solid(kinds.StateComponent):
         self._external_work_local = 0.0
 
     @property
+    def frame_work(self) -> float:
+        """Collective: work [J] the moving frame's loads (centrifugal, gravity turned into the frame) did on the
+        elastic motion since construction, summed over the ranks (0 without motion)."""
+        if self.frame is None:
+            return 0.0
+        self._frame_work_summed += _sum(self.comm, self.frame_work_local)
+        self.frame_work_local = 0.0
+        return self._frame_work_summed
+
+    @property
     def positions(self) -> np.ndarray:
-        """Current positions (n_owned, 3) [m]."""
-        return self.mesh.points[: self.n_owned_nodes] + self.displacements
+        """Current positions (n_owned, 3) [m] (world; with motion, the frame carries X + u)."""
+        body = self.mesh.points[: self.n_owned_nodes] + self.displacements
+        return body if self.frame is None else self.frame.to_world(body, self.time)
+
+    @property
+    def world_displacements(self) -> np.ndarray:
+        """positions - reference positions (n_owned, 3) [m]: the displacement a viewer sees (with motion it
+        holds the rigid motion too; `displacements` is the elastic part, in the frame's axes)."""
+        return self.positions - self.mesh.points[: self.n_owned_nodes]
+
+    @property
+    def world_velocities(self) -> np.ndarray:
+        """Velocities in world axes (n_owned, 3) [m/s]: with motion V + omega x R (X + u - c0) + R u'."""
+        if self.frame is None:
+            return self.velocities
+        body = self.mesh.points[: self.n_owned_nodes] + self.displacements
+        return self.frame.world_velocities(body, self.velocities, self.time)
 
     @property
     def reference_positions(self) -> np.ndarray:
@@ -525,7 +607,8 @@ class Solid(kinds.StateComponent):
 
     @property
     def velocities(self) -> np.ndarray:
-        """Velocity over the last step v^{n-1/2} (exact for prescribed nodes), (n_owned, 3) [m/s]."""
+        """Velocity over the last step v^{n-1/2} (exact for prescribed nodes), (n_owned, 3) [m/s]; with
+        motion the elastic velocity relative to the frame, in its axes (world_velocities: the total)."""
         return self.velocity_vec.getArray(readonly=True).reshape(-1, 3).copy()
 
     @property
@@ -560,6 +643,8 @@ class Solid(kinds.StateComponent):
         state["time"] = kinds.scalar(float(self.time))
         state["step_count"] = kinds.scalar(int(self.step_count))
         state["external_work"] = kinds.scalar(float(self.external_work))
+        if self.frame is not None:
+            state["frame_work"] = kinds.scalar(float(self.frame_work))
         if self.heat is not None:
             state["heat"] = self.heat.state_dict(nodes)
             state["heat"]["thermoelastic_work"] = kinds.scalar(float(self.thermoelastic_work))
@@ -580,6 +665,11 @@ class Solid(kinds.StateComponent):
         self.displacement_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
         self.time, self.step_count = float(state["time"]), int(state["step_count"])
         self.external_work = float(state["external_work"])
+        if (self.frame is None) != ("frame_work" not in state):
+            here, there = ("has no", "has") if self.frame is None else ("has", "has no")
+            raise kinds.StateMismatch(f"solid '{self.name}' {here} motion: in this scene, it {there} in the checkpoint")
+        if self.frame is not None:
+            self._frame_work_summed, self.frame_work_local = float(state["frame_work"]), 0.0
         if (self.heat is None) != ("heat" not in state):
             here, there = ("does not", "does") if self.heat is None else ("does", "does not")
             raise kinds.StateMismatch(f"solid '{self.name}' {here} conduct heat in this scene, it {there} in the checkpoint")
@@ -597,14 +687,15 @@ class Solid(kinds.StateComponent):
     # -------------------------------------------------------- post-processing
     @property
     def stresses(self) -> np.ndarray:
-        """Collective: Cauchy stress at each owned cell's centroid, Voigt (xx, yy, zz, yz, xz, xy) [Pa]."""
+        """Collective: Cauchy stress at each owned cell's centroid, Voigt (xx, yy, zz, yz, xz, xy) [Pa], in world
+        axes (a solid with motion computes it in its frame and turns it)."""
         displacement = local_values(self.displacement_vec, 3)
         delta_t = local_values(self.temperature_vec, 1)[:, 0] - self.reference_temperature
         out = np.empty((self.mesh.n_owned_cells, 6))
         kernels.cell_stresses(self.mesh.points, self.mesh.cells, self.mesh.n_owned_cells, displacement, delta_t,
                               self.element.centroid_gradients, self.element.centroid_values, self.lam, self.mu,
                               self._thermal_load_coefficient, out)
-        return out
+        return out if self.frame is None else self.frame.symmetric_to_world(out, self.time)
 
     @property
     def von_mises(self) -> np.ndarray:
@@ -639,7 +730,9 @@ class Solid(kinds.StateComponent):
             inertia = product.getArray(readonly=True)
         total = (force + inertia.reshape(-1, 3))[nodes].sum(axis=0)
         self.comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
-        return total
+        # With motion: the elastic (frame) part of the support force, turned into world axes; the frame's own
+        # inertial loads are among the applied loads, so this is what the supports add to them.
+        return total if self.frame is None else self.frame.vectors_to_world(total[None, :], self.time)[0]
 
     def kinetic_energy(self) -> float:
         """Collective: 1/2 v^T M v with the half-step velocity [J]."""
@@ -674,7 +767,17 @@ class Solid(kinds.StateComponent):
         return self.contact_surface(groups).triangles_global
 
     def surface_state(self, groups=None) -> tuple:
-        """Collective: (node numbers (ns,), positions (ns,3), velocities (ns,3)) of the contact nodes on every rank."""
+        """Collective: (node numbers (ns,), positions (ns,3), velocities (ns,3)) of the contact nodes on every rank
+        (world: with motion the frame carries them)."""
         surface = self.contact_surface(groups)
         positions, velocities = surface.gather(self.displacement_vec, self.velocity_vec)
+        if self.frame is not None:
+            return surface.node_indices, *self.frame_to_world(positions, velocities)
         return surface.node_indices, positions, velocities
+
+    def frame_to_world(self, body_positions, body_velocities) -> tuple:
+        """(positions, velocities) in world axes of points of this solid given in its frame (X + u, u'), now."""
+        if self.frame is None:
+            return body_positions, body_velocities
+        return (self.frame.to_world(body_positions, self.time),
+                self.frame.world_velocities(body_positions, body_velocities, self.time))

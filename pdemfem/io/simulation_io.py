@@ -187,10 +187,13 @@ class SimulationIO:
         solid, layout = self.sim.solids[name], self._solid_layouts[name]
         wanted = self.sim.scene.output.solids
         nodal = {}
+        # With motion: what a viewer sees (the frame's rigid motion included), and the elastic part apart.
         if "displacements" in wanted:
-            nodal["displacements"] = solid.displacements
+            nodal["displacements"] = solid.world_displacements
+            if solid.frame is not None:
+                nodal["elastic_displacements"] = solid.displacements
         if "velocities" in wanted:
-            nodal["velocities"] = solid.velocities
+            nodal["velocities"] = solid.world_velocities
         if "temperature" in wanted:
             nodal["temperature"] = solid.temperatures
         cells = {"von_mises": solid.von_mises} if "von_mises" in wanted else {}
