@@ -189,10 +189,11 @@ def test_moving_mesh_and_cylinder_walls_restart_bit_identical(tmp_path):
 
 
 @pytest.mark.mpi
-def test_cohesive_rolling_heated_restarts_bit_identical_on_one_and_two_ranks(tmp_path):
+def test_cohesive_rolling_heated_moving_restarts_bit_identical_on_one_and_two_ranks(tmp_path):
     """JKR adhesion and elastic-plastic rolling (touching flags and rolling springs in the contact
     history of pairs, plane walls and the FE surface) with heat on (temperatures, a hot wall's heat
-    ledger): exact continuation on 1 and 2 ranks, and 2 ranks agree with 1 to round-off."""
+    ledger) and the plate carried by a prescribed rigid motion (its frame's work and surface velocities):
+    exact continuation on 1 and 2 ranks, and 2 ranks agree with 1 to round-off."""
     import restart_scenes
     from pdemfem.simulation import Simulation
 
@@ -201,9 +202,9 @@ def test_cohesive_rolling_heated_restarts_bit_identical_on_one_and_two_ranks(tmp
     for ranks in (1, 2):
         out = tmp_path / f"ranks{ranks}"
         run_under_mpi(ranks, "restart_case.py", out, steps, EVERY, tmp_path / f"full{ranks}.npz", "--cohesive",
-                      "--heated")
+                      "--heated", "--moving")
         run_under_mpi(ranks, "restart_case.py", out, steps, EVERY, tmp_path / f"cont{ranks}.npz", "--cohesive",
-                      "--heated", "--restart", checkpoint(out, 100))
+                      "--heated", "--moving", "--restart", checkpoint(out, 100))
         results[ranks] = dict(np.load(tmp_path / f"full{ranks}.npz"))
         assert_identical(results[ranks], dict(np.load(tmp_path / f"cont{ranks}.npz")))
     history = np.genfromtxt(tmp_path / "ranks1" / "history.csv", delimiter=",", names=True)
@@ -212,9 +213,11 @@ def test_cohesive_rolling_heated_restarts_bit_identical_on_one_and_two_ranks(tmp
     assert history["heat_side_0"][-1] > 0
     temperatures = results[1]["field:temperatures"]
     assert len(np.unique(temperatures)) > 10 and temperatures.max() > 350.0
+    # The plate's frame moved under the grains and did work on them.
+    assert history["frame_work"][-1] != 0.0
     # The scene of restart_case.py, checkpoints included (a checkpoint step rebuilds canonically: row order).
-    scene = restart_scenes.heated(restart_scenes.cohesive(restart_scenes.pile_scene(tmp_path / "probe", steps,
-                                                                                     EVERY, EVERY)))
+    scene = restart_scenes.moving(restart_scenes.heated(restart_scenes.cohesive(
+        restart_scenes.pile_scene(tmp_path / "probe", steps, EVERY, EVERY))))
     with restart_scenes.cross_rank_static_solve():
         probe = Simulation.from_dict(scene, base_dir=tmp_path)
     assert probe.particle_system.tables.history_width == 8

@@ -31,7 +31,8 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem import state_dict as kinds
-from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_DAMPING, RECORD_ID, RECORD_INDEX, balance_particles,
+from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_DAMPING, RECORD_ID, RECORD_INDEX, RECORD_TRIANGLE,
+                                      RECORD_WEIGHTS, balance_particles,
                                       make_records,
                                       node_dampers)
 from pdemfem.coupling.transfer import (SUB_TRIANGLE_AREA_COORDINATES, parent_faces_from_split, spread_linear,

@@ -81,6 +81,14 @@ def heated(scene: dict) -> dict:
     return scene
 
 
+def moving(scene: dict) -> dict:
+    """The pile with the plate carried by a prescribed rigid motion (spinning about a tilted axis through its
+    centre and translating): its surface, loads and dashpots in a moving frame, the frame's work booked."""
+    scene["solids"][0]["motion"] = {"axis_point": [0.1, 0.1, 0.0], "angular_velocity": [0.5, 0.0, 5.0],
+                                    "velocity": [0.1, 0.0, 0.0]}
+    return scene
+
+
 def gather_state(simulation) -> dict | None:
     """Everything compared between runs, gathered to rank 0 and sorted by particle id."""
     comm = simulation.comm
