@@ -4,8 +4,8 @@
                                   reactions.png, deflections.png, temperatures.png, heat.png
                                   (those with data)
 
-Columns used (missing ones are skipped): ``time``; every ``*_energy`` column, ``wall_work`` and
-``thermoelastic_work``;
+Columns used (missing ones are skipped): ``time``; every ``*_energy`` column, ``wall_work``,
+``thermoelastic_work`` and ``frame_work``;
 ``mean_force_<wall>_x/_y/_z`` per wall and contact solid (the mean over each output interval;
 ``force_<wall>_*``, the value at the output time, when a history has no means);
 ``reaction_<solid>_<group>_x/_y/_z``; ``max_displacement_<solid>``; ``particles`` and ``contacts``;
@@ -16,6 +16,7 @@ title instead), and a figure all of whose quantities are constant is not drawn.
 """
 from __future__ import annotations
 
+import collections
 import csv
 import math
 import re
@@ -25,7 +26,7 @@ from typing import Dict, List
 import numpy as np
 
 from pdemfem.errors import PdemfemError
-from pdemfem.monitor import THERMAL_ENERGIES
+from pdemfem.monitor import THERMAL_ENERGIES, total_energy
 
 __all__ = ["read_history", "plot_history"]
 
@@ -134,7 +135,9 @@ def plot_history(outdir) -> List[Path]:
         axes.grid(alpha=0.3)
         save(figure, name)
 
-    fed_in = ("wall_work", "thermoelastic_work")  # work done on the system, subtracted from the total
+    # Work done on the system (and the streams' net energy brought in), subtracted from the total as
+    # pdemfem.monitor.total_energy does.
+    fed_in = ("wall_work", "thermoelastic_work", "stream_energy", "frame_work")
     energies = [name for name in data if (name.endswith("_energy") or name in (*fed_in, "solid_load_potential"))
                 and name not in THERMAL_ENERGIES]  # heat content has its own figure (heat.png)
     varying = [name for name in energies if not is_constant(data[name])]
@@ -143,9 +146,9 @@ def plot_history(outdir) -> List[Path]:
         for name in varying:
             axes.plot(time, data[name], label=name.replace("_", " "))
         if len(energies) > 1:
-            # The bookkeeping total (pdemfem.monitor.total_energy): wall work is fed in, not held.
-            total = (sum(data[name] for name in energies if name not in fed_in)
-                     - sum(data.get(name, 0.0) for name in fed_in))
+            # The bookkeeping total, as the run monitor sums it (elementwise over the rows).
+            # A column the run did not write (e.g. no rotation) counts as zero.
+            total = total_energy(collections.defaultdict(float, data))
             axes.plot(time, total, "k--", label="total (conserved up to integration error)")
         finish(figure, axes, "energy [J]", "energies", _constant_note(data, energies, " J"), "energies.png")
 

@@ -66,11 +66,12 @@ def _solid_surface(path: Path):
     with h5py.File(path, "r") as handle:
         points = np.asarray(handle["mesh/points"])
         cells = np.asarray(handle["mesh/cells"], dtype=np.int64)
-    _, last = _last_step(path, ["displacements"])
+    _, last = _last_step(path, ["displacements", "elastic_displacements"])
     displacements = last.get("displacements", np.zeros_like(points))
     faces = boundary_faces(cells)
     moved = points + displacements
-    magnitude = np.linalg.norm(displacements, axis=1)
+    # A solid under motion: coloured by its deformation, not by how far its frame carried it.
+    magnitude = np.linalg.norm(last.get("elastic_displacements", displacements), axis=1)
     return moved[faces], magnitude[faces].mean(axis=1)
 
 

@@ -124,8 +124,12 @@ def main(job_file):
         if heat and "temperature" in point_array_names(reader):
             heated.append((display, reader))
         elif "displacements" in point_array_names(reader):
-            bars = color_by_magnitude(display, reader, view, "displacements", "Plasma (matplotlib)",
-                                      "displacement [m]", bars)
+            # A solid under motion: coloured by its deformation, not by how far its frame carried it.
+            field = ("elastic_displacements" if "elastic_displacements" in point_array_names(reader)
+                     else "displacements")
+            bars = color_by_magnitude(display, reader, view, field, "Plasma (matplotlib)",
+                                      "displacement [m]" if field == "displacements" else "elastic displacement [m]",
+                                      bars)
         display.EdgeColor = [0.2, 0.2, 0.2]
         time = solid_time if time is None else max(time, solid_time)
         report["solids"].append(servermanager.Fetch(surface).GetNumberOfCells())

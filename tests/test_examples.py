@@ -74,7 +74,7 @@ def test_example_runs_a_window_with_its_particles_and_energy_accounted_for(path,
     totals = np.array([total_energy(row) for row in rows])
     # Heat content (m c T) is not a mechanical energy: kept out of the scale as it is out of the total.
     forms = [name for name in history if (name.endswith("_energy") or name in (
-        "wall_work", "solid_load_potential", "thermoelastic_work")) and "thermal_energy" not in name]
+        "wall_work", "solid_load_potential", "thermoelastic_work", "frame_work")) and "thermal_energy" not in name]
     changed = sum(float(np.ptp(history[name])) for name in forms)
     drift = float(np.abs(totals - totals[0]).max())
     # Something must happen: contacts formed (grains landed or collided), not a free fall only.
