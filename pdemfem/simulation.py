@@ -302,6 +302,8 @@ class Simulation:
             columns += ["thermoelastic_work"]
         if self._moving_solids():
             columns += ["frame_work"]
+        if self._free_axle_solids():
+            columns += ["axle_energy"]
         if self.particle_system.heat:
             columns += ["thermal_energy", "particle_thermal_energy"]
             columns += [f"heat_{name}" for name in self.particle_system.heat_ledger.names]
@@ -316,6 +318,7 @@ class Simulation:
         for solid, group in self._support_groups():
             columns += [f"reaction_{solid}_{group}_x", f"reaction_{solid}_{group}_y", f"reaction_{solid}_{group}_z"]
         columns += [f"max_displacement_{name}" for name in self.solids]
+        columns += [f"axle_height_{name}" for name in self._free_axle_solids()]
         if self.streams is not None or self.outlets is not None:
             columns += ["particles_in", "mass_in", "particles_out", "mass_out", "stream_energy"]
             columns += [f"mass_out_{name}" for name in (self.outlets.names if self.outlets is not None else [])]
@@ -349,6 +352,9 @@ class Simulation:
             displacements = solid.displacements
             local = float(np.sqrt((displacements ** 2).sum(axis=1)).max()) if len(displacements) else 0.0
             row[f"max_displacement_{name}"] = self.comm.allreduce(local, op=MPI.MAX)
+        for name in self._free_axle_solids():
+            solid = self.solids[name]
+            row[f"axle_height_{name}"] = float(solid.frame.centre(solid.time)[2])
         if self.streams is not None or self.outlets is not None:
             row.update(self.stream_totals())
         return row
@@ -430,6 +436,10 @@ class Simulation:
             # elastic motion, and through their surfaces on the particles.
             energies["frame_work"] = (sum(solid.frame_work for solid in self.solids.values())
                                       + sum(surface.frame_work() for surface in self.coupled_surfaces))
+        if self._free_axle_solids():
+            # A free axis's own kinetic and potential energy (the particles' work on it is in frame_work).
+            energies["axle_energy"] = sum(self.solids[name].frame.axle_energy(self.solids[name].gravity[2])
+                                          for name in self._free_axle_solids())
         conducting = [self.solids[name] for name in self._conducting_solids()]
         if conducting:
             # Strain energy the thermal load's refreshes put in (work fed in, like a moving wall's).
@@ -453,6 +463,9 @@ class Simulation:
 
     def _moving_solids(self) -> list:
         return [name for name, solid in self.solids.items() if solid.frame is not None]
+
+    def _free_axle_solids(self) -> list:
+        return [name for name in self._moving_solids() if self.solids[name].frame.carried_mass is not None]
 
     def _conducting_solids(self) -> list:
         return [name for name, solid in self.solids.items() if solid.heat is not None]

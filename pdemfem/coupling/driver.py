@@ -77,7 +77,9 @@ class CouplingDriver(kinds.StateComponent):
         The load is scaled so that the solid receives F^0 dt, the impulse the particles get from F^0."""
         for surface in self.surfaces:
             surface.collect_contact_forces(keep_dampers=False)
-            surface.send_forces_to_solid(self.dt / self.lead, dampers=False)
+        self._kick_free_axes(self.dt / self.lead, self.lead)
+        for surface in self.surfaces:
+            surface.send_forces_to_solid(self.dt / self.lead, dampers=False, interval=self.lead, steps=1)
         self._advance_solids(self.lead)
 
     def _advance_solids(self, interval: float) -> None:
@@ -86,6 +88,8 @@ class CouplingDriver(kinds.StateComponent):
             surface.send_heat_to_solid(interval)
         for name, solid in self.solids.items():
             self.fem_substeps[name] = solid.advance(interval)
+        for solid in self._free_axes():
+            solid.frame.drift(interval)
         for surface in self.surfaces:
             surface.refresh_vertices(interval)
             if surface.conducting:
@@ -93,6 +97,27 @@ class CouplingDriver(kinds.StateComponent):
             # The records move between ranks only when particles can have moved since they were taken.
             surface.balance_dampers(self.dt, exchange=self.fem_every > 1)
         self.advances += 1
+
+    def _free_axes(self) -> list:
+        return [solid for solid in self.solids.values()
+                if getattr(solid, "frame", None) is not None and solid.frame.carried_mass is not None]
+
+    def _kick_free_axes(self, scale: float, interval: float) -> None:
+        """Collective, before the forces are sent: each free axis (fem/frame.py, free sinkage) takes the vertical
+        force the particles put on its solid over the window (scale x the accumulated forces, the mean the solid
+        receives; summed over the ranks: one reduction per advance, only in scenes with a free axis)."""
+        free = self._free_axes()
+        if not free:
+            return
+        forces = np.zeros(len(free))
+        for index, solid in enumerate(free):
+            for surface in self.surfaces:
+                if surface.solid is solid:
+                    forces[index] += scale * surface.accumulated_forces[:, 2].sum()
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, forces, op=MPI.SUM)
+        for force, solid in zip(forces, free):
+            solid.frame.kick(float(force), float(solid.gravity[2]), interval)
 
     def after_particle_step(self) -> None:
         """Collective: collect counter-forces, and every fem_every steps advance the solids."""
@@ -102,9 +127,11 @@ class CouplingDriver(kinds.StateComponent):
         if self.steps_since_advance < self.fem_every:
             return
         interval = self.steps_since_advance * self.dt
+        # Mean load over the interval: the same impulse as the per-step loads.
+        self._kick_free_axes(1.0 / self.steps_since_advance, interval)
         for surface in self.surfaces:
-            # Mean load over the interval: the same impulse as the per-step loads.
-            surface.send_forces_to_solid(1.0 / self.steps_since_advance)
+            surface.send_forces_to_solid(1.0 / self.steps_since_advance, interval=interval,
+                                         steps=self.steps_since_advance)
         self._advance_solids(interval)
         self.steps_since_advance = 0
 

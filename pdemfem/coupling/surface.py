@@ -69,7 +69,10 @@ class CoupledSurface(kinds.StateComponent):
         self.frame = getattr(solid, "frame", None)
         if self.frame is not None:
             self.frame_work_local = 0.0  # [J] this rank's contacts: work the moving frame did on the particles
-            self._window_forces = None
+            # The frame's part of the last advance's surface displacement (per vertex), and the mean force of the
+            # window before it (this rank's contacts): its work is booked when the next window's force is known.
+            self._pending_frame_part = np.zeros((len(self.node_indices), 3))
+            self._pending_forces = None
             self.refresh_vertices()
         if self.conducting:
             self.triangle_surface.vertex_heat = np.zeros(len(self.node_indices))
@@ -84,8 +87,6 @@ class CoupledSurface(kinds.StateComponent):
                                    contacts.triangle, contacts.weights, contacts.damping)
             if len(records) and np.any(self.triangle_surface.transport_velocity):
                 self._remove_transport(records)
-            if len(records) and self.frame is not None:
-                self._remove_frame_velocity(records)
             if len(records):
                 self.damper_records.append(records)
         self.node_forces[:] = 0.0
@@ -110,26 +111,34 @@ class CoupledSurface(kinds.StateComponent):
         records[:, RECORD_DAMPING + 6:RECORD_DAMPING + 9] -= tangential
         records[:, RECORD_DAMPING + 9:RECORD_DAMPING + 12] -= tangential
 
-    def _remove_frame_velocity(self, records) -> None:
-        """Moving frame: the records' particle and surface velocities relative to the frame's material at the
-        contact point (interpolated by the contact's weights), so the nodal dashpots act on the elastic
-        velocity and the particles' balance stays exact (see the module docstring)."""
+    def _remove_frame_velocity(self, records, interval: float) -> None:
+        """Moving frame, before an advance of `interval`: the records' particle and surface velocities relative
+        to the frame's material at the contact point as the frame will move over that advance (its chord
+        velocity, interpolated by the contact's weights), so the nodal dashpots act on the elastic velocity the
+        solid integrates and the particles' balance after the advance sees the same frame motion."""
+        solid = self.solid
+        coming = (self.frame.chord_velocities(self._body_positions, solid.time, interval)
+                  if interval > 0.0 else self._frame_vertex_velocities)
         triangles = records[:, RECORD_TRIANGLE].astype(np.int64)
         weights = records[:, RECORD_WEIGHTS:RECORD_WEIGHTS + 3]
-        frame = np.einsum("nk,nkd->nd", weights, self._frame_vertex_velocities[self.triangles[triangles]])
+        frame = np.einsum("nk,nkd->nd", weights, coming[self.triangles[triangles]])
         records[:, RECORD_DAMPING + 6:RECORD_DAMPING + 9] -= frame
         records[:, RECORD_DAMPING + 9:RECORD_DAMPING + 12] -= frame
 
-    def send_forces_to_solid(self, scale: float, dampers: bool = True) -> None:
+    def send_forces_to_solid(self, scale: float, dampers: bool = True, interval: float = 0.0, steps: int = 1) -> None:
         """Add scale x the accumulated forces to the solid's nodal loads (ADD_VALUES to the owners).
 
         dampers: the kept contacts' dashpots go to the solid as nodal dashpots (scaled alike) and leave
-        the held load; without, the held load keeps them (the prime, whose impulse is F^0 dt exactly)."""
+        the held load; without, the held load keeps them (the prime, whose impulse is F^0 dt exactly).
+        A moving frame (interval: the coming advance's, steps: the window's DEM steps) books the work of the
+        last advance's frame displacement now that the force after it is known (_book_frame_work)."""
         forces = scale * self.accumulated_forces
         if self.frame is not None:
-            self._window_forces = forces.copy()  # the whole contact force: the frame's work (refresh_vertices)
+            self._book_frame_work(self.accumulated_forces / steps)
         records = np.concatenate(self.damper_records) if self.damper_records else np.zeros((0, RECORD_COLUMNS))
         self.damper_records = []
+        if dampers and len(records) and self.frame is not None:
+            self._remove_frame_velocity(records, interval)
         self._advanced_records = records if dampers else records[:0]
         if dampers and len(records):
             tensors = np.zeros((len(self.node_indices), 6))
@@ -243,7 +252,18 @@ class CoupledSurface(kinds.StateComponent):
             state["frame_work"] = kinds.scalar(float(self.frame_work()))
             state["frame_vertex_velocities"] = kinds.global_array(self._frame_vertex_velocities)
             state["relative_vertex_velocities"] = kinds.global_array(self._relative_vertex_velocities)
+            state["pending_frame_displacements"] = kinds.global_array(self._pending_frame_part)
+            state["pending_forces"] = kinds.global_array(self._summed_pending_forces())
         return state
+
+    def _book_frame_work(self, mean_force) -> None:
+        """The frame's work on the particles through the last advance's jump of the surface: the particles felt
+        the window's mean force before it and feel `mean_force` (this window's) after it; the contacts'
+        energy changed by the trapezoid of the two times the jump (second order, and booked when the
+        particles' energy shows the jump: booking it at the advance would run one step ahead of them)."""
+        if self._pending_forces is not None:
+            self.frame_work_local -= 0.5 * float(np.sum((self._pending_forces + mean_force) * self._pending_frame_part))
+        self._pending_forces = np.array(mean_force, dtype=float)
 
     def frame_work(self) -> float:
         """Collective: work [J] the moving frame did on the particles through this surface (all ranks), kept on
@@ -269,6 +289,9 @@ class CoupledSurface(kinds.StateComponent):
             self.frame_work_local = float(state["frame_work"]) if comm.rank == 0 else 0.0
             self._frame_vertex_velocities = np.array(state["frame_vertex_velocities"], dtype=float)
             self._relative_vertex_velocities = np.array(state["relative_vertex_velocities"], dtype=float)
+            self._pending_frame_part = np.array(state["pending_frame_displacements"], dtype=float)
+            pending = np.asarray(state["pending_forces"], dtype=float)
+            self._pending_forces = None if not len(pending) else (pending if comm.rank == 0 else 0.0 * pending)
         if self.conducting:
             if "accumulated_heat" not in state:
                 raise kinds.StateMismatch(f"solid '{self.name}': the checkpoint holds no surface heat (written "
@@ -276,11 +299,23 @@ class CoupledSurface(kinds.StateComponent):
             self.triangle_surface.vertex_heat[:] = np.asarray(state["accumulated_heat"]) if comm.rank == 0 else 0.0
             self.refresh_temperatures()
 
+    def _summed_pending_forces(self) -> np.ndarray:
+        """Collective: the pending window force of a moving frame summed over the ranks ((0, 3): none yet)."""
+        pending = (np.zeros((len(self.node_indices), 3)) if self._pending_forces is None
+                   else self._pending_forces.copy())
+        self.solid.comm.Allreduce(MPI.IN_PLACE, pending, op=MPI.SUM)
+        if self._pending_forces is None:
+            return np.zeros((0, 3))
+        return pending
+
     def canonicalize(self) -> None:
         """Collective: the window's sums moved to rank 0, as a restart has them."""
         comm = self.solid.comm
         total, records, heat = self._window_sums(comm)
         self.accumulated_forces[:] = total if comm.rank == 0 else 0.0
+        if self.frame is not None and self._pending_forces is not None:
+            summed = self._summed_pending_forces()
+            self._pending_forces = summed if comm.rank == 0 else 0.0 * summed
         self.restore_records(records, comm)
         if self.conducting:
             self.triangle_surface.vertex_heat[:] = heat if comm.rank == 0 else 0.0
@@ -317,9 +352,7 @@ class CoupledSurface(kinds.StateComponent):
             velocities = displacement / interval
             self._frame_vertex_velocities = frame_part / interval
             self._relative_vertex_velocities = elastic / interval
-            if self._window_forces is not None:
-                self.frame_work_local -= float(np.sum(self._window_forces * frame_part))
-                self._window_forces = None
+            self._pending_frame_part = frame_part
         else:
             self._frame_vertex_velocities = self.frame.frame_velocities(positions, solid.time)
             self._relative_vertex_velocities = velocities - self._frame_vertex_velocities

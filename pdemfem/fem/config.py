@@ -156,6 +156,10 @@ class MotionConfig(StrictModel):
     angular_velocity: Vector3 = Field(
         (0.0, 0.0, 0.0), description="rotation vector [rad/s]: the axis direction times the spin rate (right-handed)")
     velocity: Vector3 = Field((0.0, 0.0, 0.0), description="translation velocity of the axis [m/s]")
+    carried_mass: Optional[PositiveFloat] = Field(
+        None, description="free sinkage: the axis moves freely along z (its z velocity starts at velocity[2]) "
+                          "carrying this mass [kg] (the wheel's own and its load: weight carried_mass x |g|) "
+                          "against the particles' forces; absent: the axis follows `velocity` exactly")
 
 
 class SolidConfig(StrictModel):

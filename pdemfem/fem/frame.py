@@ -26,6 +26,13 @@ the elastic displacements, and minus the particles' contact forces times the fra
 surface displacement over each FE advance.  The prescribed motion itself (the drive) is not a degree
 of freedom: its torque and force are whatever keep the motion, and its work is that frame work.
 
+Free sinkage (carried_mass M).  The axis may instead move freely along z: its height h and rate h' obey
+M h'' = F_z + M g_z (F_z the particles' force on the solid, summed over the window of each FE advance),
+integrated as the solid advances (kick h' with the window's mean force, then drift h); the frame's
+acceleration a = h'' z adds -m a to the elastic body's loads, like gravity.  The axis's energy
+1/2 M h'^2 - M g_z h (`axle_energy`) is held energy; the particles' work on it is part of `frame_work`.
+The elastic body's own momentum relative to the frame is left out of the axis's equation (small strain).
+
 Limits.  Small strain relative to the frame; the rigid rotation is exact for any angle.  A spin near
 the solid's lowest elastic frequency is resonance-like (spin softening makes K - m omega^2
 indefinite): the solid's critical step bound is unchanged, the divergence monitor stops such a run.
@@ -55,10 +62,18 @@ def rotation_matrix(axis_unit, angle: float) -> np.ndarray:
 class MovingFrame:
     """The rigid motion x = c0 + V t + R(t) (p - c0) of a solid's `motion:` entry (see the module docstring)."""
 
-    def __init__(self, axis_point, angular_velocity, velocity):
+    def __init__(self, axis_point, angular_velocity, velocity, carried_mass=None):
         self.axis_point = np.asarray(axis_point, dtype=float).copy()
         self.angular_velocity = np.asarray(angular_velocity, dtype=float).copy()
         self.velocity = np.asarray(velocity, dtype=float).copy()
+        # Free sinkage: the axis's height above its prescribed path (h), its rate (h', replacing velocity[2])
+        # and the acceleration of the last kick (the elastic body feels -m a); None: prescribed.
+        self.carried_mass = None if carried_mass is None else float(carried_mass)
+        self.height = 0.0
+        self.height_rate = float(self.velocity[2]) if self.carried_mass is not None else 0.0
+        self.acceleration = np.zeros(3)
+        if self.carried_mass is not None:
+            self.velocity[2] = 0.0
         self.spin = float(np.linalg.norm(self.angular_velocity))
         self.axis = self.angular_velocity / self.spin if self.spin > 0.0 else np.array([0.0, 0.0, 1.0])
 
@@ -66,8 +81,42 @@ class MovingFrame:
         return rotation_matrix(self.axis, self.spin * time)
 
     def centre(self, time: float) -> np.ndarray:
-        """Where the axis point is at `time`."""
-        return self.axis_point + self.velocity * time
+        """Where the axis point is at `time` (free sinkage: at the height the last advance reached)."""
+        return self.axis_point + self.velocity * time + np.array([0.0, 0.0, self.height])
+
+    @property
+    def translation_velocity(self) -> np.ndarray:
+        return self.velocity + np.array([0.0, 0.0, self.height_rate])
+
+    def chord_velocities(self, body_positions, time: float, interval: float) -> np.ndarray:
+        """(x(time + interval) - x(time)) / interval of frame-fixed points p (n, 3): the frame's motion over an
+        advance that starts now (a free axis moves with its current rate h' over it)."""
+        body = np.asarray(body_positions, float) - self.axis_point
+        turned = body @ (self.rotation(time + interval) - self.rotation(time)).T
+        return self.translation_velocity + turned / interval
+
+    def kick(self, vertical_force: float, gravity_z: float, interval: float) -> None:
+        """Free sinkage, before an advance of `interval`: h' += interval (F_z / M + g_z)."""
+        rate = self.height_rate + interval * (vertical_force / self.carried_mass + gravity_z)
+        self.acceleration[2] = (rate - self.height_rate) / interval
+        self.height_rate = rate
+
+    def drift(self, interval: float) -> None:
+        """Free sinkage, after the advance: h += interval h'."""
+        self.height += interval * self.height_rate
+
+    def axle_energy(self, gravity_z: float) -> float:
+        """Free sinkage: 1/2 M h'^2 - M g_z h [J] (0 when the axis is prescribed)."""
+        if self.carried_mass is None:
+            return 0.0
+        return 0.5 * self.carried_mass * self.height_rate ** 2 - self.carried_mass * gravity_z * self.height
+
+    def state(self) -> dict:
+        return {"height": self.height, "height_rate": self.height_rate, "acceleration": self.acceleration[2]}
+
+    def load_state(self, state: dict) -> None:
+        self.height, self.height_rate = float(state["height"]), float(state["height_rate"])
+        self.acceleration[2] = float(state["acceleration"])
 
     def to_world(self, body_positions, time: float) -> np.ndarray:
         """World positions (n, 3) of body-frame positions p = X + u."""
@@ -78,11 +127,13 @@ class MovingFrame:
         """World velocities V + omega x R (p - c0) + R u' (n, 3)."""
         rotation = self.rotation(time)
         arms = (np.asarray(body_positions, float) - self.axis_point) @ rotation.T
-        return self.velocity + np.cross(self.angular_velocity, arms) + np.asarray(body_velocities, float) @ rotation.T
+        return (self.translation_velocity + np.cross(self.angular_velocity, arms)
+                + np.asarray(body_velocities, float) @ rotation.T)
 
     def frame_velocities(self, world_positions, time: float) -> np.ndarray:
         """Velocity (n, 3) of the frame's material at world positions: V + omega x (x - c(t))."""
-        return self.velocity + np.cross(self.angular_velocity, np.asarray(world_positions, float) - self.centre(time))
+        return self.translation_velocity + np.cross(self.angular_velocity,
+                                                    np.asarray(world_positions, float) - self.centre(time))
 
     def vectors_to_body(self, vectors, time: float) -> np.ndarray:
         """R(t)^T v for rows v (n, 3): world components to body-frame components."""

@@ -96,7 +96,7 @@ class Solid(kinds.StateComponent):
         self.damping_alpha, self.damping_beta = config.damping.alpha, config.damping.beta
         motion = getattr(config, "motion", None)
         # A prescribed rigid motion the solid deforms relative to (frame.py); None: a fixed frame.
-        self.frame = (MovingFrame(motion.axis_point, motion.angular_velocity, motion.velocity)
+        self.frame = (MovingFrame(motion.axis_point, motion.angular_velocity, motion.velocity, motion.carried_mass)
                       if motion is not None else None)
 
         thermal = config.thermal if config.thermal is not None else (ThermalConfig() if heat else None)
@@ -472,7 +472,9 @@ class Solid(kinds.StateComponent):
     def _compute_frame_load(self) -> None:
         """The frame's loads at the current time and displacement (frame.frame_load) into _frame_load_vec."""
         frame = self.frame
-        body_gravity = frame.vectors_to_body(np.asarray(self.gravity, float)[None, :], self.time)[0]
+        # Gravity and, with a free axis, the frame's acceleration (-m a, like a body force) in the frame's axes.
+        effective = np.asarray(self.gravity, float) - frame.acceleration
+        body_gravity = frame.vectors_to_body(effective[None, :], self.time)[0]
         frame_load(self.displacement_vec.getArray(readonly=True), self._lumped_mass_values, self._centrifugal_reference,
                    self._gravity_unit_loads, body_gravity, frame.angular_velocity, self._frame_load_vec.getArray())
 
@@ -645,6 +647,7 @@ class Solid(kinds.StateComponent):
         state["external_work"] = kinds.scalar(float(self.external_work))
         if self.frame is not None:
             state["frame_work"] = kinds.scalar(float(self.frame_work))
+            state["frame"] = {key: kinds.scalar(float(value)) for key, value in self.frame.state().items()}
         if self.heat is not None:
             state["heat"] = self.heat.state_dict(nodes)
             state["heat"]["thermoelastic_work"] = kinds.scalar(float(self.thermoelastic_work))
@@ -670,6 +673,7 @@ class Solid(kinds.StateComponent):
             raise kinds.StateMismatch(f"solid '{self.name}' {here} motion: in this scene, it {there} in the checkpoint")
         if self.frame is not None:
             self._frame_work_summed, self.frame_work_local = float(state["frame_work"]), 0.0
+            self.frame.load_state(state["frame"])
         if (self.heat is None) != ("heat" not in state):
             here, there = ("does not", "does") if self.heat is None else ("does", "does not")
             raise kinds.StateMismatch(f"solid '{self.name}' {here} conduct heat in this scene, it {there} in the checkpoint")
