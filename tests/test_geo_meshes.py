@@ -104,6 +104,16 @@ def test_a_solid_geo_gives_the_same_mesh_every_time_and_the_msh_made_from_it(tmp
     assert from_msh.source.endswith("block.msh") and first.source.endswith("block.geo")
 
 
+def test_a_solid_geo_with_a_physical_volume_gives_only_its_cells_as_its_msh_does(tmp_path):
+    # Two separate blocks, only the first one a physical volume: gmsh saves only its cells in the .msh.
+    geo = _write(tmp_path, "two_blocks.geo", 'SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 1, 1, 1};\n'
+                                             'Box(2) = {2, 0, 0, 1, 1, 1};\nMesh.CharacteristicLengthMax = 0.5;\n'
+                                             'Physical Volume("first") = {1};\n')
+    from_geo = load_mesh(geo, tmp_path)
+    assert from_geo.points[:, 0].max() == 1.0
+    _assert_same_solid_mesh(from_geo, load_mesh(_msh_from_geo(geo, 3), tmp_path))
+
+
 def test_a_solid_geo_with_a_syntax_error_names_the_file_and_gmsh_message(tmp_path, capfd):
     _write(tmp_path, "broken.geo", 'SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 1, 1, 1;\n')
     with pytest.raises(MeshError) as caught:
