@@ -17,7 +17,7 @@ import numpy as np
 
 from pdemfem.errors import MeshError
 from pdemfem.fem.config import BOX_FACES, BoxMeshConfig
-from pdemfem.gmsh_geo import gmsh_session, mesh_geo_file
+from pdemfem.gmsh_geo import gmsh_session, mesh_geo_file, note_read_failure
 
 # Faces of a positively oriented tetrahedron, each listed counter-clockwise seen from outside.
 OUTWARD_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int64)
@@ -141,6 +141,7 @@ def _read_gmsh_file(path: Path):
             try:
                 gmsh.open(source)
             except Exception as exc:
+                note_read_failure()  # gmsh parses a file it cannot read as .msh as a script
                 raise MeshError(where=source, problem=f"cannot read the mesh ({exc})",
                                 fix="export it from gmsh as .msh (format 4.1 or 2.2)") from None
         node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
