@@ -71,37 +71,47 @@ BEVERLOO_K = 1.4
 
 
 # ------------------------------------------------------------------------------------------ geometry
-def _write_ascii_stl(path: Path, name: str, triangles) -> None:
-    lines = [f"solid {name}"]
-    for triangle in triangles:
-        a, b, c = (np.asarray(vertex, dtype=float) for vertex in triangle)
-        normal = np.cross(b - a, c - a)
-        normal = normal / np.linalg.norm(normal)
-        lines.append("  facet normal {:.9e} {:.9e} {:.9e}".format(*normal))
-        lines.append("    outer loop")
-        for vertex in (a, b, c):
-            lines.append("      vertex {:.9e} {:.9e} {:.9e}".format(*vertex))
-        lines.append("    endloop")
-        lines.append("  endfacet")
-    lines.append(f"endsolid {name}")
+def _geo_number(value: float) -> str:
+    return f"{value:.12g}"
+
+
+def _write_rectangles_geo(path: Path, description: str, rectangles) -> None:
+    """A gmsh .geo file of flat rectangles (corner, edge_u, edge_v), each meshed as two triangles (a
+    transfinite surface with one cell: a flat wall needs no more); each rectangle's normal is u x v."""
+    lines = [f"// {line}" for line in description.splitlines()]
+    lines += ["// Written by benchmarks/hopper_discharge.py (write_example_meshes); pdemfem meshes it when a scene",
+              "// names it (walls[].file).  To look at it: gmsh " + path.name + " -2"]
+    for index, (corner, edge_u, edge_v) in enumerate(rectangles):
+        p0 = np.asarray(corner, float)
+        corners = (p0, p0 + edge_u, p0 + edge_u + edge_v, p0 + edge_v)
+        first_point, first_line = 4 * index + 1, 4 * index + 1
+        for k, point in enumerate(corners):
+            lines.append(f"Point({first_point + k}) = {{{', '.join(_geo_number(c) for c in point)}}};")
+        for k in range(4):
+            lines.append(f"Line({first_line + k}) = {{{first_point + k}, {first_point + (k + 1) % 4}}};")
+        loop = ", ".join(str(first_line + k) for k in range(4))
+        lines.append(f"Curve Loop({index + 1}) = {{{loop}}};")
+        lines.append(f"Plane Surface({index + 1}) = {{{index + 1}}};")
+        lines.append(f"Transfinite Curve{{{loop}}} = 2;")
+        lines.append(f"Transfinite Surface{{{index + 1}}};")
     path.write_text("\n".join(lines) + "\n")
 
 
-def _rectangle(corner, edge_u, edge_v):
-    """Two triangles of the rectangle corner, corner + u, corner + u + v, corner + v."""
-    p0 = np.asarray(corner, float)
-    p1, p2, p3 = p0 + edge_u, p0 + edge_u + edge_v, p0 + edge_v
-    return [(p0, p1, p2), (p0, p2, p3)]
-
-
-def write_slot_bottom(path: Path, slot_width: float) -> None:
-    """The bin's floor at z = 0: two plates leaving a slot of width b across the depth, centred at B/2."""
+def slot_bottom_rectangles(slot_width: float):
+    """The bin's floor at z = 0: two plates leaving a slot of width b across the depth, centred at B/2
+    (normal +z: into the bin)."""
     half = 0.5 * (BIN_WIDTH - slot_width)
     if half <= 0:
         raise ValueError(f"slot width {slot_width} must be smaller than the bin width {BIN_WIDTH}")
-    triangles = _rectangle((0, 0, 0), np.array([half, 0, 0]), np.array([0, BIN_DEPTH, 0]))
-    triangles += _rectangle((BIN_WIDTH - half, 0, 0), np.array([half, 0, 0]), np.array([0, BIN_DEPTH, 0]))
-    _write_ascii_stl(path, "hopper_bottom", triangles)
+    return [((0, 0, 0), np.array([half, 0, 0]), np.array([0, BIN_DEPTH, 0])),
+            ((BIN_WIDTH - half, 0, 0), np.array([half, 0, 0]), np.array([0, BIN_DEPTH, 0]))]
+
+
+def write_slot_bottom(path: Path, slot_width: float) -> None:
+    """The floor with a slot of width b as a gmsh .geo file (slot_bottom_rectangles)."""
+    _write_rectangles_geo(path, f"The hopper's floor at z = 0: two plates leaving a {slot_width * 1000:g} mm slot "
+                                f"across the bin's depth,\ncentred at x = {BIN_WIDTH / 2 * 1000:g} mm.",
+                          slot_bottom_rectangles(slot_width))
 
 
 def strip_bounds():
@@ -113,19 +123,24 @@ def strip_bounds():
 
 
 def write_strips(folder: Path):
-    """The x = B wall as separate flat strips (one STL each); returns their file names, bottom to top."""
+    """The x = B wall as separate flat strips (one .geo file each, normal +x); returns their file names,
+    bottom to top."""
     names = []
     for index, (low, high) in enumerate(strip_bounds()):
-        name = f"hopper_strip_{index}.stl"
-        triangles = _rectangle((BIN_WIDTH, 0, low), np.array([0, BIN_DEPTH, 0]), np.array([0, 0, high - low]))
-        _write_ascii_stl(folder / name, f"strip_{index}", triangles)
+        name = f"hopper_strip_{index}.geo"
+        rectangle = ((BIN_WIDTH, 0, low), np.array([0, BIN_DEPTH, 0]), np.array([0, 0, high - low]))
+        _write_rectangles_geo(folder / name, f"Strip {index} of the hopper's measured wall at x = "
+                                             f"{BIN_WIDTH * 1000:g} mm: z = {low * 1000:g} .. {high * 1000:g} mm.",
+                              [rectangle])
         names.append(name)
     return names
 
 
 def write_example_meshes(folder: Path = MESHES) -> None:
-    """The mesh files examples/hopper_discharge.yaml reads (run once; they are committed)."""
-    write_slot_bottom(folder / "hopper_bottom.stl", EXAMPLE_SLOT)
+    """The mesh (.geo) files of examples/hopper_discharge.yaml's walls (run once; they are committed):
+        python -c "import sys; sys.path.insert(0, 'benchmarks'); import hopper_discharge as h; h.write_example_meshes()"
+    The panel's mesh, hopper_panel.geo, is written by hand."""
+    write_slot_bottom(folder / "hopper_bottom.geo", EXAMPLE_SLOT)
     write_strips(folder)
 
 
@@ -261,13 +276,16 @@ def scene_dict(slot_width: float | None, end: float, mesh_folder: Path, output_e
     for wall in data["walls"]:
         if wall.get("kind") == "mesh":
             wall["file"] = str((SCENE.parent / wall["file"]).resolve())
+    for solid in data.get("solids", []):
+        if isinstance(solid.get("mesh"), str):
+            solid["mesh"] = str((SCENE.parent / solid["mesh"]).resolve())
     bottom = next(wall for wall in data["walls"] if wall["name"] == "bottom")
     if slot_width is None:
         data["walls"].remove(bottom)
         data["walls"].append({"name": "plug", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1],
                               "material": bottom["material"], "velocity": [0, 0, -floor_speed]})
     else:
-        path = mesh_folder / f"hopper_bottom_{slot_width * 1000:.1f}mm.stl"
+        path = mesh_folder / f"hopper_bottom_{slot_width * 1000:.1f}mm.geo"
         write_slot_bottom(path, slot_width)
         bottom["file"] = str(path)
     data["output"] = {"dir": "out", "every": output_every,

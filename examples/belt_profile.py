@@ -80,7 +80,9 @@ def main(argv=None):
     solid = scene.solids[0]
     material = scene.materials[solid.material]
     grain_density = scene.materials[scene.particles[0].material].density
-    (x0, y0, z0), (x1, y1, z1) = solid.mesh.box
+    (points, u_start, u_end, t_start, t_end), (positions, radii, t_grains) = read_steps(args.run, solid.name)
+    # The belt's extent from its mesh (a box however it was meshed: meshes/belt.geo or a mesh: {box} entry).
+    (x0, y0, z0), (x1, y1, z1) = points.min(axis=0), points.max(axis=0)
     idlers = sorted(region.cylinder.point[0] for region in solid.regions.values())
     span = idlers[1] - idlers[0]
     if len(idlers) != 3 or abs((idlers[2] - idlers[1]) - span) > 1e-9 * span:
@@ -90,7 +92,6 @@ def main(argv=None):
     beam_stiffness = material.youngs_modulus * width * thickness ** 3 / 12.0
     plate_stiffness = beam_stiffness / (1.0 - material.poisson_ratio ** 2)
 
-    (points, u_start, u_end, t_start, t_end), (positions, radii, t_grains) = read_steps(args.run, solid.name)
     masses = grain_density * 4.0 / 3.0 * np.pi * radii ** 3
     on_span = [np.sum(masses[(positions[:, 0] >= a) & (positions[:, 0] < b)])
                for a, b in ((idlers[0], idlers[1]), (idlers[1], idlers[2]))]

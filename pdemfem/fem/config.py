@@ -165,7 +165,8 @@ class MotionConfig(StrictModel):
 class SolidConfig(StrictModel):
     name: str = Field(description="unique solid name (shares one namespace with the walls)")
     mesh: Union[str, BoxMeshConfig] = Field(
-        description="gmsh .msh (any meshio-readable tetrahedral mesh), relative to the scene file, or a generated box"
+        description="gmsh .msh, or a gmsh .geo file (meshed in 3-D when the scene is read), or any meshio-readable "
+                    "tetrahedral mesh, relative to the scene file; or a generated box"
     )
     material: str = Field(description="a name under materials")
     element: Literal["P1", "P2"] = Field("P1", description="linear (P1) or quadratic (P2) tetrahedra")

@@ -1,4 +1,5 @@
-"""The global (serial) tetrahedral mesh: read with meshio or generate a box with gmsh, check, name groups.
+"""The global (serial) tetrahedral mesh: read with meshio, mesh a gmsh .geo file or generate a box with gmsh,
+check, name groups.
 
 Runs on one rank (the partitioner distributes the result).  Groups are sets of
 boundary triangles given as corner triples oriented with the outward normal.
@@ -16,6 +17,7 @@ import numpy as np
 
 from pdemfem.errors import MeshError
 from pdemfem.fem.config import BOX_FACES, BoxMeshConfig
+from pdemfem.gmsh_geo import gmsh_session, mesh_geo_file, note_read_failure
 
 # Faces of a positively oriented tetrahedron, each listed counter-clockwise seen from outside.
 OUTWARD_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int64)
@@ -68,11 +70,7 @@ def generate_box_mesh(spec: BoxMeshConfig) -> GlobalMesh:
     import gmsh
 
     low, high = np.array(spec.box[0], float), np.array(spec.box[1], float)
-    initialized_here = not gmsh.isInitialized()
-    if initialized_here:
-        gmsh.initialize(interruptible=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
+    with gmsh_session():
         gmsh.model.add("pdemfem_box")
         volume = gmsh.model.occ.addBox(*low, *(high - low))
         gmsh.model.occ.synchronize()
@@ -87,9 +85,6 @@ def generate_box_mesh(spec: BoxMeshConfig) -> GlobalMesh:
         node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
         _, _, element_nodes = gmsh.model.mesh.getElements(3, volume)
         gmsh.model.remove()
-    finally:
-        if initialized_here:
-            gmsh.finalize()
     order = np.argsort(node_tags)
     points = coordinates.reshape(-1, 3)[order]
     tets = np.searchsorted(node_tags[order], element_nodes[0]).reshape(-1, 4).astype(np.int64)
@@ -98,11 +93,12 @@ def generate_box_mesh(spec: BoxMeshConfig) -> GlobalMesh:
 
 
 def read_mesh_file(path: Path) -> GlobalMesh:
-    """Tetrahedra and named triangle groups: gmsh .msh through the gmsh API, other formats through meshio."""
+    """Tetrahedra and named triangle groups: gmsh .msh through the gmsh API, a gmsh .geo file meshed in
+    3-D by gmsh in memory, other formats through meshio."""
     source = str(path)
     if not path.is_file():
         raise MeshError(where=source, problem="file not found", fix="check the path (relative to the scene file)")
-    if path.suffix.lower() == ".msh":
+    if path.suffix.lower() in (".msh", ".geo"):
         # meshio keeps one physical tag per element, so a triangle in two groups ('boundary' and
         # 'bottom') would lose one; gmsh's own reader keeps every group.
         points, tets, triangle_groups = _read_gmsh_file(path)
@@ -128,6 +124,9 @@ def _no_volume_error(source, other_volume=()):
     problem = "the mesh has no volume cells (tetrahedra)"
     if other_volume:
         problem = f"the mesh's volume cells are {sorted(other_volume)}; only tetrahedra are supported"
+    if source.lower().endswith(".geo"):
+        fix = "define the solid's volume in the .geo file (a Volume, e.g. Box or Extrude) and do not recombine it"
+        return MeshError(where=source, problem=problem, fix=fix)
     return MeshError(where=source, problem=problem, fix="mesh the volume (gmsh: Mesh > 3D) with tetrahedra and save again")
 
 
@@ -135,27 +134,28 @@ def _read_gmsh_file(path: Path):
     import gmsh
 
     source = str(path)
-    initialized_here = not gmsh.isInitialized()
-    if initialized_here:
-        gmsh.initialize(interruptible=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        try:
-            gmsh.open(source)
-        except Exception as exc:
-            raise MeshError(where=source, problem=f"cannot read the mesh ({exc})",
-                            fix="export it from gmsh as .msh (format 4.1 or 2.2)") from None
+    with gmsh_session():
+        if path.suffix.lower() == ".geo":
+            mesh_geo_file(path, 3)
+        else:
+            try:
+                gmsh.open(source)
+            except Exception as exc:
+                note_read_failure()  # gmsh parses a file it cannot read as .msh as a script
+                raise MeshError(where=source, problem=f"cannot read the mesh ({exc})",
+                                fix="export it from gmsh as .msh (format 4.1 or 2.2)") from None
         node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
         order = np.argsort(node_tags)
         sorted_tags = node_tags[order]
         points = coordinates.reshape(-1, 3)[order]
         tet_parts, other_volume = [], set()
-        for element_type, _, nodes in zip(*gmsh.model.mesh.getElements(3)):
-            name, _, _, n_nodes, _, n_corners = gmsh.model.mesh.getElementProperties(element_type)
-            if name.lower().startswith("tetrahedron"):
-                tet_parts.append(nodes.reshape(-1, n_nodes)[:, :4])
-            else:
-                other_volume.add(name)
+        for volume in _saved_volumes():
+            for element_type, _, nodes in zip(*gmsh.model.mesh.getElements(3, volume)):
+                name, _, _, n_nodes, _, n_corners = gmsh.model.mesh.getElementProperties(element_type)
+                if name.lower().startswith("tetrahedron"):
+                    tet_parts.append(nodes.reshape(-1, n_nodes)[:, :4])
+                else:
+                    other_volume.add(name)
         if not tet_parts:
             raise _no_volume_error(source, other_volume)
         tets = np.searchsorted(sorted_tags, np.vstack(tet_parts)).astype(np.int64)
@@ -170,10 +170,20 @@ def _read_gmsh_file(path: Path):
             if parts:
                 groups[name] = np.searchsorted(sorted_tags, np.vstack(parts)).astype(np.int64)
         gmsh.model.remove()
-    finally:
-        if initialized_here:
-            gmsh.finalize()
     return points, tets, groups
+
+
+def _saved_volumes() -> list:
+    """The volumes whose cells a .msh saved from gmsh's current model would hold: those of the 3-D physical
+    groups if there are any (gmsh saves only grouped elements), else every volume.  A .geo file meshed in
+    memory so gives the cells of the .msh made from it; a .msh read back holds only those volumes anyway."""
+    import gmsh
+
+    grouped = {entity for dim, tag in gmsh.model.getPhysicalGroups(3)
+               for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)}
+    if grouped:
+        return sorted(int(entity) for entity in grouped)
+    return [tag for _, tag in gmsh.model.getEntities(3)]
 
 
 def _read_meshio_file(path: Path):

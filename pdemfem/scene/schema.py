@@ -219,7 +219,8 @@ class WallConfig(StrictModel):
         (0.0, 0.0, 0.0), description="conveyor: the surface moves with this velocity [m/s] (its part along the "
                                      "surface) while the geometry stays in place (docs/streams.md)")
     # kind: mesh
-    file: Optional[str] = Field(None, description="surface mesh (STL, gmsh .msh, or any meshio format), relative to the scene")
+    file: Optional[str] = Field(None, description="surface mesh (STL, gmsh .msh, a gmsh .geo file meshed in 2-D "
+                                                            "when the scene is read, or any meshio format), relative to the scene")
     scale: PositiveFloat = Field(1.0, description="factor applied to the file's coordinates (e.g. 0.001 for mm)")
     center: Vector3 = Field((0.0, 0.0, 0.0), description="rotation centre at t = 0 (moves with velocity) [m]")
     one_sided: bool = Field(False, description="contact only on the side the triangle normals point to")

@@ -1,4 +1,5 @@
-"""Surface meshes from files: STL (ASCII or binary), gmsh .msh, and whatever else meshio reads.
+"""Surface meshes from files: STL (ASCII or binary), gmsh .msh, a gmsh .geo file (meshed in 2-D in
+memory), and whatever else meshio reads.
 
 Returns welded vertices and triangles; quadratic triangles (triangle6) are split
 into four linear ones, quads into two.  Degenerate triangles (repeated vertex or
@@ -11,38 +12,39 @@ from pathlib import Path
 import numpy as np
 
 from pdemfem.errors import MeshError
+from pdemfem.gmsh_geo import gmsh_session, mesh_geo_file
+
+# gmsh's element type names -> meshio's, for the surface cells the readers split into triangles.
+GMSH_SURFACE_TYPES = {"triangle 3": "triangle", "triangle 6": "triangle6", "quadrilateral 4": "quad"}
 
 
 def read_surface(path, scale: float = 1.0):
     """(vertices (n, 3) float64, triangles (m, 3) int32) of the triangle cells of a mesh file, times `scale`."""
-    import meshio
-
     path = Path(path)
     if not path.is_file():
         raise MeshError(str(path), "surface mesh file not found", "check the path (relative paths start at the scene file)")
-    try:
-        mesh = meshio.read(path)
-    except Exception as error:  # meshio raises many kinds; all mean "cannot use this file"
-        raise MeshError(str(path), f"cannot read the surface mesh ({type(error).__name__}: {error})",
-                        "give an STL, gmsh .msh or another meshio-readable surface mesh") from None
+    if path.suffix.lower() == ".geo":
+        points, cells = _mesh_geo_surface(path)
+    else:
+        points, cells = _read_meshio_surface(path)
     blocks = []
-    for block in mesh.cells:
-        data = np.asarray(block.data, dtype=np.int64)
-        if block.type == "triangle":
+    for cell_type, data in cells:
+        data = np.asarray(data, dtype=np.int64)
+        if cell_type == "triangle":
             blocks.append(data)
-        elif block.type == "triangle6":
+        elif cell_type == "triangle6":
             # Corner nodes 0-2, mid-edge nodes 3 (01), 4 (12), 5 (20): four linear triangles.
             a, b, c, ab, bc, ca = (data[:, k] for k in range(6))
             blocks.append(np.concatenate([np.stack(t, axis=1) for t in
                                           ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]))
-        elif block.type == "quad":
+        elif cell_type == "quad":
             blocks.append(np.concatenate([data[:, [0, 1, 2]], data[:, [0, 2, 3]]]))
     if not blocks:
-        types = sorted({block.type for block in mesh.cells})
+        types = sorted({cell_type for cell_type, _ in cells})
         raise MeshError(str(path), f"no triangles in the mesh (cell types: {types or 'none'})",
                         "export the surface as triangles (in gmsh: mesh 2D and save the surface elements)")
     triangles = np.concatenate(blocks)
-    points = np.asarray(mesh.points, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64)
     if points.shape[1] == 2:
         points = np.column_stack([points, np.zeros(len(points))])
     points = points[:, :3] * float(scale)
@@ -56,6 +58,42 @@ def read_surface(path, scale: float = 1.0):
                                    + (f" after scale {scale:g}" if scale != 1.0 else "") + ")",
                         "repair or re-export the surface mesh")
     return clean_surface(points, triangles)
+
+
+def _read_meshio_surface(path: Path):
+    """(points, [(meshio cell type, connectivity)]) of a mesh file meshio reads."""
+    import meshio
+
+    try:
+        mesh = meshio.read(path)
+    except Exception as error:  # meshio raises many kinds; all mean "cannot use this file"
+        raise MeshError(str(path), f"cannot read the surface mesh ({type(error).__name__}: {error})",
+                        "give an STL, gmsh .msh or .geo, or another meshio-readable surface mesh") from None
+    return mesh.points, [(block.type, block.data) for block in mesh.cells]
+
+
+def _mesh_geo_surface(path: Path):
+    """(points, [(meshio cell type, connectivity)]) of a .geo file's surfaces meshed in 2-D by gmsh: the
+    surfaces of its 2-D physical groups if it has any (what a .msh saved from it would hold), else all."""
+    import gmsh
+
+    cells = []
+    with gmsh_session():
+        mesh_geo_file(path, 2)
+        node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
+        grouped = {entity for dim, tag in gmsh.model.getPhysicalGroups(2)
+                   for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)}
+        surfaces = sorted(int(entity) for entity in grouped) or [tag for _, tag in gmsh.model.getEntities(2)]
+        order = np.argsort(node_tags)
+        sorted_tags = node_tags[order]
+        for surface in surfaces:
+            for element_type, _, nodes in zip(*gmsh.model.mesh.getElements(2, surface)):
+                name, _, _, n_nodes = gmsh.model.mesh.getElementProperties(element_type)[:4]
+                cell_type = GMSH_SURFACE_TYPES.get(f"{name.split()[0].lower()} {n_nodes}", name)
+                connectivity = np.searchsorted(sorted_tags, nodes).reshape(-1, n_nodes)
+                cells.append((cell_type, connectivity))
+        gmsh.model.remove()
+    return coordinates.reshape(-1, 3)[order], cells
 
 
 def clean_surface(vertices, triangles):

@@ -1,0 +1,15 @@
+// Strip 6 of the hopper's measured wall at x = 60 mm: z = 60 .. 70 mm.
+// Written by benchmarks/hopper_discharge.py (write_example_meshes); pdemfem meshes it when a scene
+// names it (walls[].file).  To look at it: gmsh hopper_strip_6.geo -2
+Point(1) = {0.06, 0, 0.06};
+Point(2) = {0.06, 0.03, 0.06};
+Point(3) = {0.06, 0.03, 0.07};
+Point(4) = {0.06, 0, 0.07};
+Line(1) = {1, 2};
+Line(2) = {2, 3};
+Line(3) = {3, 4};
+Line(4) = {4, 1};
+Curve Loop(1) = {1, 2, 3, 4};
+Plane Surface(1) = {1};
+Transfinite Curve{1, 2, 3, 4} = 2;
+Transfinite Surface{1};
