@@ -57,11 +57,13 @@ def test_sphere_on_a_solid_belt_ends_rolling_at_two_sevenths_of_the_belt_speed(t
         speeds.append(p.velocities[0, 0])
         assert sim.time < 2.0 * t_star, "no transition to rolling"
     # While the sphere slips, the belt drive's work (wall_work: the force on the sphere times the transport
-    # velocity) is what the sphere gained plus what friction dissipated: the total stays at its start value
-    # to the round-off of ~1000 step increments (measured 2e-8 of the drive's work; without the booking the
-    # whole drive work would be missing).
+    # velocity, booked per step as the trapezoid of the powers at the two force evaluations around it, the
+    # rule velocity Verlet's kinetic energy follows) is what the sphere gained plus what friction dissipated.
+    # Measured 2.8e-6 of the drive's work at dt = t*/1000 (7.2e-7 at t*/4000: first order, from the first
+    # steps, where the tangential spring loads from zero); without the booking the whole drive work would
+    # be missing.
     drive_work = slipping_energies["wall_work"]
-    assert abs(total_energy(slipping_energies) - start_total) < 1e-6 * drive_work, (
+    assert abs(total_energy(slipping_energies) - start_total) < 1e-5 * drive_work, (
         total_energy(slipping_energies) - start_total, drive_work)
     fraction = slips[-2] / (slips[-2] - slips[-1])
     t_roll = times[-2] + fraction * (times[-1] - times[-2])
@@ -82,6 +84,10 @@ def test_sphere_on_a_solid_belt_ends_rolling_at_two_sevenths_of_the_belt_speed(t
     # what friction dissipated while slipping.
     energies = sim.energies()
     assert energies["wall_work"] > energies["kinetic_energy"] + energies["rotational_energy"] > 0.0
+    # Through the switch from slipping to rolling, where the friction force drops from mu m g to ~0 in a step:
+    # measured 3.0e-6 of the drive's work (2.2e-12 J).  Booking each step's work with the one force after the
+    # move put it a step early and lost 3.7e-10 J (5e-4 of it) at the switch.
+    assert abs(total_energy(energies) - start_total) < 1e-5 * energies["wall_work"]
 
 
 # A belt like examples/belt.yaml's: 0.6 m x 8 cm x 6 mm, E = 1e8 Pa, on idlers at x = 0, 0.3, 0.6.

@@ -117,6 +117,8 @@ class ParticleSystem(kinds.StateComponent):
         self._check_periodic_lengths()
         self._rebuild(force_rebalance=True)
         self._compute_forces()
+        # Power of the plane walls on the particles at the last force evaluation (see step()).
+        self.walls.previous_power = self._plane_power()
         if self.heat:
             # The first step's forces come from this evaluation, its heat does not: a step moves the heat
             # of its own evaluation (step), so nothing is booked for this one.
@@ -163,8 +165,16 @@ class ParticleSystem(kinds.StateComponent):
             ratio = update_temperatures(state.owned_count, state.temperatures, state.heat_flows, state.mass,
                                         state.material_index, self.heat_capacities, dt)
             self.heat_step_ratio = max(self.heat_step_ratio, ratio)
-        # Work done on the particles by moving walls: -F_wall . v_wall dt.
-        self.walls.work -= float(np.sum(self.walls.forces * self.walls.velocities)) * dt
+        # Work done on the particles by moving walls, -F_wall . v_wall: the trapezoid of the powers at the
+        # force evaluations before and after the walls' move (velocity Verlet's kinetic energy takes the two
+        # forces' mean; one force booked the step's work a step early: a first-order error wherever a wall's
+        # force jumps, e.g. a grain on a conveyor turning from slipping to rolling).
+        power = self._plane_power()
+        self.walls.work += 0.5 * (self.walls.previous_power + power) * dt
+        self.walls.previous_power = power
+
+    def _plane_power(self) -> float:
+        return -float(np.sum(self.walls.forces * self.walls.velocities))
 
     # ---------------------------------------------------------------- rebuild
     def canonical_rebuild(self, records=None, decomposition=None) -> None:

@@ -37,6 +37,9 @@ class ContributorWall(kinds.StateComponent):
         self.totals = np.zeros(6)
         self.work = 0.0
         self._step_work = 0.0
+        # The step work (power x dt) of the last force evaluation, summed over the ranks: the next step books
+        # the trapezoid of it and its own (_book_step_work); None before the first evaluation.
+        self._previous_step_work = None
         # With heat on: the wall's fixed temperature [K] (NaN: adiabatic), and the heat [J] it gave this
         # rank's particles in the last add_forces (the particle system books it).
         self.temperature = math.nan
@@ -59,7 +62,17 @@ class ContributorWall(kinds.StateComponent):
     def take_summed_totals(self, summed: np.ndarray) -> None:
         """The local_totals() summed over the ranks (the particle system's one SUM per step)."""
         self.totals[:] = summed[:6]
-        self.work += summed[6] - self._step_work
+        self._book_step_work(float(summed[6]))
+
+    def _book_step_work(self, step_work: float) -> None:
+        """Book the wall's work on the particles over the step just taken: the trapezoid of the step works
+        (power x dt) at the force evaluations before and after the wall's move, the rule velocity Verlet's
+        kinetic energy follows (the evaluation alone books the work a step early: a first-order error
+        wherever the force jumps).  On one rank add_forces calls it with the rank's (= the total) work;
+        on several, take_summed_totals with the total."""
+        if self._previous_step_work is not None:
+            self.work += 0.5 * (self._previous_step_work + step_work)
+        self._previous_step_work = step_work
 
     def set_temperature(self, temperature: float) -> None:
         """Hold the wall at `temperature` [K] (with heat on, touching particles exchange heat with it)."""
@@ -82,8 +95,13 @@ class ContributorWall(kinds.StateComponent):
 
     # ------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
-        return {"work": kinds.scalar(float(self.work)), "totals": kinds.global_array(self.totals)}
+        state = {"work": kinds.scalar(float(self.work)), "totals": kinds.global_array(self.totals)}
+        if self._previous_step_work is not None:
+            state["previous_step_work"] = kinds.scalar(float(self._previous_step_work))
+        return state
 
     def load_state_dict(self, state: dict) -> None:
         self.work = float(state["work"])
+        if "previous_step_work" in state:
+            self._previous_step_work = float(state["previous_step_work"])
         self.totals = np.array(state["totals"], dtype=float)

@@ -176,5 +176,6 @@ class CylinderWall(ContributorWall):
             self.temperature)
         self.contact_count = int(contacts)
         self._step_work = float(work)
-        self.work += self._step_work
+        if system.comm.size == 1:
+            self._book_step_work(self._step_work)
         return elastic, dissipated, contacts

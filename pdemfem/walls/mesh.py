@@ -312,7 +312,8 @@ class TriangleSurface(ContributorWall):
         if self.work_of_transport_only:
             work = self._transport_work(system.dt)
         self._step_work = float(work)
-        self.work += self._step_work
+        if system.comm.size == 1:
+            self._book_step_work(self._step_work)
         return elastic, dissipated, contacts
 
     def _transport_work(self, dt: float) -> float:

@@ -34,8 +34,10 @@ class PlaneWalls(kinds.StateComponent):
         self.candidate_particles = np.zeros(0, dtype=np.int64)
         self.candidate_walls = np.zeros(0, dtype=np.int64)
         self.points_at_build = self.points.copy()
-        # Work the walls have done on the particles (a moving wall feeds energy in).
+        # Work the walls have done on the particles (a moving wall feeds energy in), and their power at the
+        # last force evaluation (the particle system books each step's work as the trapezoid of two powers).
         self.work = 0.0
+        self.previous_power = 0.0
 
     @property
     def count(self) -> int:
@@ -65,6 +67,7 @@ class PlaneWalls(kinds.StateComponent):
     def state_dict(self) -> dict:
         state = {name: kinds.global_array(getattr(self, name)) for name in self._ARRAYS}
         state["work"] = kinds.scalar(float(self.work))
+        state["previous_power"] = kinds.scalar(float(self.previous_power))
         return state
 
     def load_state_dict(self, state: dict) -> None:
@@ -75,6 +78,8 @@ class PlaneWalls(kinds.StateComponent):
         for name in self._ARRAYS:
             getattr(self, name)[...] = state[name]
         self.work = float(state["work"])
+        # A checkpoint written before the trapezoid rule: the power of its forces (the same evaluation).
+        self.previous_power = float(state.get("previous_power", -np.sum(self.forces * self.velocities)))
 
     def index(self, name: str) -> int:
         try:
