@@ -11,6 +11,7 @@ so it ends at t* = 2 Omega r0 / (7 mu g).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -150,3 +151,22 @@ def test_free_axle_exchanges_energy_with_the_particles_exactly(tmp_path):
     assert largest_exchange > 1e-4
     assert largest_error < 1e-4 * largest_exchange
     assert sim.energies()["axle_energy"] < 0.0  # it sank: its potential fell by more than it holds in motion
+
+
+def test_dt_auto_sees_a_spinning_box_and_warns_for_a_spinning_mesh_file():
+    """The impact speed dt auto resolves includes a spinning solid's surface speed |V| + |omega| r_max (known for a
+    box mesh); for a mesh file (whose extent `check` does not read) it warns, naming the key to set."""
+    import yaml
+
+    from pdemfem.scene import derived
+    from pdemfem.scene.schema import Scene
+
+    data = yaml.safe_load((Path(__file__).resolve().parent.parent / "examples" / "tread.yaml").read_text())
+    del data["time"]["expected_impact_speed"]
+    warned = [w for w in derived.warnings(Scene.model_validate(data)) if "expected_impact_speed" in w]
+    assert len(warned) == 1 and "solids[0] (wheel)" in warned[0]
+    data["solids"][0]["mesh"] = {"box": [[-0.08, -0.02, -0.08], [0.08, 0.02, 0.08]], "cells": [2, 1, 2]}
+    speed, how = derived.impact_speed_estimate(Scene.model_validate(data))
+    corner = math.sqrt(0.08 ** 2 + 0.02 ** 2 + 0.08 ** 2)
+    assert "wall speed" in how
+    assert speed >= 0.5 + 7.8125 * corner  # V + omega r_max (plus the grains' fall)

@@ -422,6 +422,25 @@ def _wall_speed(wall) -> float:
     return speed
 
 
+def _moving_solid_speed(solid) -> Optional[float]:
+    """Largest surface speed of a solid under `motion:`, |V| + |omega| r_max, when its extent is known
+    without reading a mesh file (a box mesh); None for a file mesh; 0 without motion."""
+    motion = getattr(solid, "motion", None)
+    if motion is None:
+        return 0.0
+    spin = _norm(motion.angular_velocity)
+    speed = _norm(motion.velocity)
+    if spin == 0.0:
+        return speed
+    if isinstance(solid.mesh, str):
+        return None
+    low, high = solid.mesh.box
+    reach = max(_norm([corner[axis] - motion.axis_point[axis] for axis in range(3)])
+                for corner in ((x, y, z) for x in (low[0], high[0]) for y in (low[1], high[1])
+                               for z in (low[2], high[2])))
+    return speed + spin * reach
+
+
 def impact_speed_estimate(scene: Scene) -> Tuple[float, str]:
     """(speed, how it was obtained) -- see `expected_impact_speed`."""
     if scene.time.expected_impact_speed is not None:
@@ -429,7 +448,8 @@ def impact_speed_estimate(scene: Scene) -> Tuple[float, str]:
     velocities = [v for group in scene.particles for v in _initial_velocities(group)]
     initial = max((_norm(v) for v in velocities), default=0.0)
     spread = _velocity_spread(velocities)
-    wall_speed = max((_wall_speed(wall) for wall in scene.walls), default=0.0)
+    wall_speed = max([_wall_speed(wall) for wall in scene.walls]
+                     + [_moving_solid_speed(solid) or 0.0 for solid in scene.solids], default=0.0)
     height = fall_height(scene)
     fall = math.sqrt(2.0 * _norm(scene.gravity) * height)
     on_walls = initial + wall_speed + fall
@@ -603,6 +623,12 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
     `pdemfem run` repeats them before the first step.
     """
     found: List[str] = list(solid_warnings(scene))
+    if scene.time.expected_impact_speed is None:
+        for index, solid in enumerate(scene.solids):
+            if _moving_solid_speed(solid) is None:
+                found.append(f"solids[{index}] ({solid.name}): dt auto does not see the surface speed of this spinning "
+                             f"solid (its mesh is a file): set time.expected_impact_speed to at least |velocity| + "
+                             f"|angular_velocity| x its largest distance from motion.axis_point")
     count = particle_count(scene)
     if count == 0 and not any(group.insert.kind == "stream" for group in scene.particles):
         found.append("the scene has no particles")
