@@ -167,8 +167,9 @@ class ParticleSystem(kinds.StateComponent):
             ratio = update_temperatures(state.owned_count, state.temperatures, state.heat_flows, state.mass,
                                         state.material_index, self.heat_capacities, dt)
             self.heat_step_ratio = max(self.heat_step_ratio, ratio)
-        # Work done on the particles by moving walls: -F_wall . v_wall dt.
-        self.walls.work -= float(np.sum(self.walls.forces * self.walls.velocities)) * dt
+        # Work done on the particles by moving walls (or moving surfaces): -F_wall . v_wall dt.
+        if self.walls.velocities.any():
+            self.walls.work -= float(np.sum(self.walls.forces * self.walls.velocities)) * dt
 
     # ---------------------------------------------------------------- rebuild
     def canonical_rebuild(self, records=None, decomposition=None) -> None:
