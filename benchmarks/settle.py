@@ -120,14 +120,20 @@ def current_rss() -> int:
 
 
 def array_bytes(*objects) -> int:
-    """Bytes of every numpy array held directly by `objects` (the solver's state)."""
+    """Bytes of every numpy array held directly by `objects` (the solver's state), each buffer once: a
+    view (the neighbour list's partners and history are views of reused buffers) counts its base."""
     import numpy as np
 
     total = 0
+    counted = set()
     for item in objects:
         for value in vars(item).values():
             if isinstance(value, np.ndarray):
-                total += value.nbytes
+                while isinstance(value.base, np.ndarray):
+                    value = value.base
+                if id(value) not in counted:
+                    counted.add(id(value))
+                    total += value.nbytes
     return total
 
 

@@ -90,32 +90,8 @@ def process_environment(base: dict | None = None) -> dict:
     return environment
 
 
-# glibc's malloc serves a block above this size with its own mapping, given back to the system when freed.
-MALLOC_MMAP_THRESHOLD_BYTES = 128 * 1024
-_M_MMAP_THRESHOLD = -3  # mallopt's parameter number (malloc.h)
-
-
-def fix_malloc_mmap_threshold() -> bool:
-    """Keep large blocks out of the heap (glibc): the neighbour list, its history and a rebuild's scratch
-    arrays (megabytes each) are freed and allocated anew at every list build.  glibc by default raises
-    its mmap threshold to the largest block freed so far, after which such arrays are carved from the
-    heap, whose freed fragments stay resident: the settle benchmark's resident set grew 2.7x over its
-    116 first rebuilds (312 -> 852 B per particle; 312 -> 474 with the threshold fixed).  A
-    MALLOC_MMAP_THRESHOLD_ set by the user wins.  Returns whether the threshold was set."""
-    if os.environ.get("MALLOC_MMAP_THRESHOLD_") or not sys.platform.startswith("linux"):
-        return False
-    try:
-        import ctypes
-
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):  # not glibc (musl has no mallopt)
-        return False
-    return bool(mallopt(_M_MMAP_THRESHOLD, MALLOC_MMAP_THRESHOLD_BYTES))
-
-
 def apply_to_this_process() -> None:
-    """Set the variables in os.environ before petsc4py / mpi4py are imported (and fix malloc's
-    mmap threshold: fix_malloc_mmap_threshold).
+    """Set the variables in os.environ before petsc4py / mpi4py are imported.
 
     Debian's petsc4py is put on sys.path by a .pth file that reads PETSC_DIR when
     the interpreter starts; when PETSC_DIR was not set then, add the path here.
@@ -123,7 +99,6 @@ def apply_to_this_process() -> None:
     for key, value in process_environment().items():
         if os.environ.get(key) != value:
             os.environ[key] = value
-    fix_malloc_mmap_threshold()
     petsc_dir = os.environ.get("PETSC_DIR")
     if petsc_dir:
         petsc_python_path = os.path.join(petsc_dir, "lib", "python3", "dist-packages")

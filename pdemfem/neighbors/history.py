@@ -59,10 +59,10 @@ def collect_records(row_particles, offsets, partners, history, ids, owned_count,
 
 
 @njit(cache=True)
-def _owned_rows_of(owner_ids, ids, owned_count):
-    """The owned row holding each id of owner_ids (-1: not owned on this rank).  Ids are unique among the
-    owned rows; a table indexed by id when they are dense enough, a binary search otherwise."""
-    rows = np.full(owner_ids.shape[0], -1, dtype=np.int64)
+def _owned_rows_of(records, ids, owned_count):
+    """The owned row holding each record's owner id (-1: not owned on this rank).  Ids are unique among
+    the owned rows; a table indexed by id when they are dense enough, a binary search otherwise."""
+    rows = np.full(records.shape[0], -1, dtype=np.int64)
     if owned_count == 0:
         return rows
     smallest = ids[0]
@@ -75,16 +75,17 @@ def _owned_rows_of(owner_ids, ids, owned_count):
         row_of_id = np.full(span, -1, dtype=np.int64)
         for i in range(owned_count):
             row_of_id[ids[i] - smallest] = i
-        for k in range(owner_ids.shape[0]):
-            offset = owner_ids[k] - smallest
+        for k in range(records.shape[0]):
+            offset = np.int64(records[k, 0]) - smallest
             if 0 <= offset < span:
                 rows[k] = row_of_id[offset]
     else:
         order = np.argsort(ids[:owned_count])
         sorted_ids = ids[:owned_count][order]
-        for k in range(owner_ids.shape[0]):
-            position = np.searchsorted(sorted_ids, owner_ids[k])
-            if position < owned_count and sorted_ids[position] == owner_ids[k]:
+        for k in range(records.shape[0]):
+            owner = np.int64(records[k, 0])
+            position = np.searchsorted(sorted_ids, owner)
+            if position < owned_count and sorted_ids[position] == owner:
                 rows[k] = order[position]
     return rows
 
@@ -101,10 +102,7 @@ def restore_records(row_particles, offsets, partners, history, ids, owned_count,
     record_count = records.shape[0]
     if record_count == 0:
         return
-    owner_ids = np.empty(record_count, dtype=np.int64)
-    for k in range(record_count):
-        owner_ids[k] = np.int64(records[k, 0])
-    owner_rows = _owned_rows_of(owner_ids, ids, owned_count)
+    owner_rows = _owned_rows_of(records, ids, owned_count)
     starts = np.zeros(owned_count + 1, dtype=np.int64)
     for k in range(record_count):
         if owner_rows[k] >= 0:
