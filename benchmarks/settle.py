@@ -14,9 +14,11 @@ lattice of spacing 2.4 mm, dt = 2e-5 s, Verlet skin 0.3 r.
 It builds the scene through pdemfem's public Python API, compiles the kernels on a
 tiny copy of the scene, takes `--warmup` untimed steps, then `--pre-steps` untimed
 steps, then times `--steps` steps in chunks of `--sample-every`, sampling the
-contact count between chunks.  When `liggghts` is on PATH it runs
-benchmarks/settle_liggghts.in with the same particle count, lattice and number of
-untimed steps, and prints the ratio pdemfem / LIGGGHTS measured in the same run.
+contact count between chunks.  When `liggghts` is on PATH (LIGGGHTS-PUBLIC 3.8.0
+from the Debian package: `apt-get install liggghts`, which installs /usr/bin/liggghts)
+it runs benchmarks/settle_liggghts.in with the same particle count, lattice and
+number of untimed steps, and prints the ratio pdemfem / LIGGGHTS measured in the
+same run.
 All figures go to a JSON file (default benchmarks/results/settle.json).
 See docs/performance.md for what every figure means.
 """
@@ -118,14 +120,20 @@ def current_rss() -> int:
 
 
 def array_bytes(*objects) -> int:
-    """Bytes of every numpy array held directly by `objects` (the solver's state)."""
+    """Bytes of every numpy array held directly by `objects` (the solver's state), each buffer once: a
+    view (the neighbour list's partners and history are views of reused buffers) counts its base."""
     import numpy as np
 
     total = 0
+    counted = set()
     for item in objects:
         for value in vars(item).values():
             if isinstance(value, np.ndarray):
-                total += value.nbytes
+                while isinstance(value.base, np.ndarray):
+                    value = value.base
+                if id(value) not in counted:
+                    counted.add(id(value))
+                    total += value.nbytes
     return total
 
 

@@ -90,8 +90,34 @@ def process_environment(base: dict | None = None) -> dict:
     return environment
 
 
+# glibc's malloc serves a block above this size with its own mapping, given back to the system when freed.
+MALLOC_MMAP_THRESHOLD_BYTES = 1 << 20
+_M_MMAP_THRESHOLD = -3  # mallopt's parameter number (malloc.h)
+
+
+def fix_malloc_mmap_threshold() -> bool:
+    """Keep blocks of a megabyte and more out of the heap (glibc).  A list rebuild allocates and frees
+    several such arrays (the contact records, their look-up tables, a re-sort's per-particle arrays);
+    glibc by default raises its mmap threshold to the largest block freed so far, after which they are
+    carved from the heap, whose freed fragments stay resident.  On the settle benchmark's first 3000
+    steps (115 rebuilds) the resident set rose by 967 B per particle by default and 596 B with this
+    threshold, rebuilds taking the same CPU time (0.59 s); a 128 KiB threshold gave 457 B but nearly
+    doubled the rebuilds' time (page faults on every smaller array too).  A MALLOC_MMAP_THRESHOLD_ set
+    by the user wins.  Returns whether the threshold was set."""
+    if os.environ.get("MALLOC_MMAP_THRESHOLD_") or not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):  # not glibc (musl has no mallopt)
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, MALLOC_MMAP_THRESHOLD_BYTES))
+
+
 def apply_to_this_process() -> None:
-    """Set the variables in os.environ before petsc4py / mpi4py are imported.
+    """Set the variables in os.environ before petsc4py / mpi4py are imported (and fix malloc's
+    mmap threshold: fix_malloc_mmap_threshold).
 
     Debian's petsc4py is put on sys.path by a .pth file that reads PETSC_DIR when
     the interpreter starts; when PETSC_DIR was not set then, add the path here.
@@ -99,6 +125,7 @@ def apply_to_this_process() -> None:
     for key, value in process_environment().items():
         if os.environ.get(key) != value:
             os.environ[key] = value
+    fix_malloc_mmap_threshold()
     petsc_dir = os.environ.get("PETSC_DIR")
     if petsc_dir:
         petsc_python_path = os.path.join(petsc_dir, "lib", "python3", "dist-packages")

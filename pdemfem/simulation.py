@@ -206,7 +206,10 @@ class Simulation:
             system.step()
             if self.solids:
                 self.coupling.after_particle_step()
-            self.surface_force_means.add([self.wall_force(name) for name in self._surface_names()])
+            if not self.contributor_walls:  # plane walls alone: their force rows, in the scene's order
+                self.surface_force_means.add(system.walls.forces)
+            else:
+                self.surface_force_means.add([self.wall_force(name) for name in self._surface_names()])
             self.step_count += 1
             self.time = self.step_count * self.dt
             if system.largest_displacement > self.runaway_displacement:

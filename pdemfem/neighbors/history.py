@@ -5,8 +5,8 @@ columns (tangential spring, rolling spring, touching flag: pdemfem.contact.regis
 are multiplied by `signs` (-1 for a spring, which flips with the pair's order) when the pair is
 seen from the other particle.  Records are taken from the Verlet
 list before a rebuild, travel with their owner when it migrates, and are looked
-up again by (owner id, partner id) through an open-addressing hash table after
-the new list is built.  Both directions are numba loops: O(pairs) each.
+up again by (owner id, partner id) after the new list is built, among the few
+records of the pair's owner.  Both directions are numba loops: O(pairs) each.
 """
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ import numpy as np
 from numba import njit
 
 RECORD_KEYS = 2  # owner id, partner id; then the history columns
-_EMPTY = -1
 
 
 @njit(inline="always", cache=True)
@@ -59,47 +58,82 @@ def collect_records(row_particles, offsets, partners, history, ids, owned_count,
     return records
 
 
-@njit(inline="always", cache=True)
-def _slot(owner, partner, mask):
-    key = owner * np.int64(2654435761) + partner * np.int64(40503)
-    return (key ^ (key >> 17)) & mask
+@njit(cache=True)
+def _owned_rows_of(records, ids, owned_count):
+    """The owned row holding each record's owner id (-1: not owned on this rank).  Ids are unique among
+    the owned rows; a table indexed by id when they are dense enough, a binary search otherwise."""
+    rows = np.full(records.shape[0], -1, dtype=np.int64)
+    if owned_count == 0:
+        return rows
+    smallest = ids[0]
+    largest = ids[0]
+    for i in range(owned_count):
+        smallest = min(smallest, ids[i])
+        largest = max(largest, ids[i])
+    span = largest - smallest + 1
+    if span <= 4 * owned_count + 1024:
+        row_of_id = np.full(span, -1, dtype=np.int64)
+        for i in range(owned_count):
+            row_of_id[ids[i] - smallest] = i
+        for k in range(records.shape[0]):
+            offset = np.int64(records[k, 0]) - smallest
+            if 0 <= offset < span:
+                rows[k] = row_of_id[offset]
+    else:
+        order = np.argsort(ids[:owned_count])
+        sorted_ids = ids[:owned_count][order]
+        for k in range(records.shape[0]):
+            owner = np.int64(records[k, 0])
+            position = np.searchsorted(sorted_ids, owner)
+            if position < owned_count and sorted_ids[position] == owner:
+                rows[k] = order[position]
+    return rows
 
 
 @njit(cache=True)
 def restore_records(row_particles, offsets, partners, history, ids, owned_count, records, signs):
-    """Fill the new list's history from the records (pairs without a record start at zero)."""
+    """Fill the new list's history from the records (pairs without a record start at zero).
+
+    A pair's record is the one of its owner: i, or j when i is a ghost (then the springs flip).  The
+    records are grouped by their owner's row (a counting sort, stable: of two records of one pair the
+    first wins), so each listed pair scans the few records of one particle, in about the order of the
+    list (a hash table over all records cost a cache miss or two per listed pair)."""
     width = history.shape[1]
     record_count = records.shape[0]
     if record_count == 0:
         return
-    # Load factor at most 3/4: short probe chains, and the table stays small next to the list.
-    size = 1
-    while 3 * size < 4 * record_count:
-        size *= 2
-    mask = np.int64(size - 1)
-    table = np.full(size, _EMPTY, dtype=np.int64)
+    owner_rows = _owned_rows_of(records, ids, owned_count)
+    starts = np.zeros(owned_count + 1, dtype=np.int64)
     for k in range(record_count):
-        owner = np.int64(records[k, 0])
-        partner = np.int64(records[k, 1])
-        slot = _slot(owner, partner, mask)
-        while table[slot] != _EMPTY:
-            slot = (slot + 1) & mask
-        table[slot] = k
+        if owner_rows[k] >= 0:
+            starts[owner_rows[k] + 1] += 1
+    for i in range(owned_count):
+        starts[i + 1] += starts[i]
+    next_slot = starts[:-1].copy()
+    record_of_slot = np.empty(starts[owned_count], dtype=np.int64)
+    partner_of_slot = np.empty(starts[owned_count], dtype=np.int64)
+    for k in range(record_count):
+        owner_row = owner_rows[k]
+        if owner_row >= 0:
+            slot = next_slot[owner_row]
+            record_of_slot[slot] = k
+            partner_of_slot[slot] = np.int64(records[k, 1])
+            next_slot[owner_row] = slot + 1
     for r in range(row_particles.shape[0]):
         i = row_particles[r]
+        flipped = i >= owned_count
         for row in range(offsets[r], offsets[r + 1]):
             j = partners[row]
-            flipped = i >= owned_count
             if flipped:
-                owner, partner = ids[j], ids[i]
+                owner_row, partner = j, ids[i]
+                if j >= owned_count:
+                    continue  # two ghosts: never listed, and no record of theirs is kept here
             else:
-                owner, partner = ids[i], ids[j]
-            slot = _slot(owner, partner, mask)
-            while table[slot] != _EMPTY:
-                k = table[slot]
-                if np.int64(records[k, 0]) == owner and np.int64(records[k, 1]) == partner:
+                owner_row, partner = i, ids[j]
+            for slot in range(starts[owner_row], starts[owner_row + 1]):
+                if partner_of_slot[slot] == partner:
+                    k = record_of_slot[slot]
                     for column in range(width):
                         value = records[k, RECORD_KEYS + column]
                         history[row, column] = signs[column] * value if flipped else value
                     break
-                slot = (slot + 1) & mask

@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from pdemfem import state_dict as kinds
-from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
+from pdemfem.neighbors.cells import cell_grid, cell_indices, sort_by_cell
 from pdemfem.neighbors.history import RECORD_KEYS, collect_records, restore_records  # noqa: F401
 
 # The 13 "forward" neighbour cells: each unordered pair of distinct cells is visited once.
@@ -31,11 +31,12 @@ _FORWARD_OFFSETS = np.array(
 
 @njit(cache=True)
 def _fill_pairs(sorted_positions, sorted_radii, skin, owned_count, order, sorted_cells, starts, dimensions,
-                forward_offsets, sorted_materials, cohesion_reach, offsets, partners):
+                forward_offsets, sorted_materials, cohesion_reach, cohesive, offsets, partners):
     """Write partners row by row (row p = particle order[p]); returns the pair count (may exceed capacity).
 
     The particles' positions, radii and materials come in cell order (row p's at p): the stencil's
-    candidates then sit side by side in memory instead of being gathered through `order`."""
+    candidates then sit side by side in memory instead of being gathered through `order`.  Without
+    cohesive pairs (`cohesive` False) the cutoff needs no look-up in cohesion_reach."""
     count = order.shape[0]
     capacity = partners.shape[0]
     nx, ny, nz = dimensions[0], dimensions[1], dimensions[2]
@@ -70,8 +71,10 @@ def _fill_pairs(sorted_positions, sorted_radii, skin, owned_count, order, sorted
                 dx = xi - sorted_positions[q, 0]
                 dy = yi - sorted_positions[q, 1]
                 dz = zi - sorted_positions[q, 2]
-                # A cohesive pair interacts until its pull-off distance beyond touching.
-                cutoff = reach + sorted_radii[q] + cohesion_reach[material_i, sorted_materials[q]]
+                cutoff = reach + sorted_radii[q]
+                if cohesive:
+                    # A cohesive pair interacts until its pull-off distance beyond touching.
+                    cutoff += cohesion_reach[material_i, sorted_materials[q]]
                 if dx * dx + dy * dy + dz * dz < cutoff * cutoff:
                     j = order[q]
                     if i_is_ghost and j >= owned_count:
@@ -83,8 +86,13 @@ def _fill_pairs(sorted_positions, sorted_radii, skin, owned_count, order, sorted
     return written
 
 
+# A buffer more than this many times the list's size is given back (many particles left the domain).
+_LARGEST_BUFFER_SLACK = 4
+
+
 class VerletList:
-    """row_particles (rows), offsets (rows+1), partners (int32), history (pairs, width) aligned with partners.
+    """row_particles (rows), offsets (rows+1), partners (int32), history (pairs, width) aligned with partners
+    (partners and history are the leading rows of buffers reused by the next build).
 
     `history_signs` (one per history column: -1 for a spring, +1 for a symmetric flag) sets the
     history width (0: no history, e.g. frictionless spheres); `cohesion_reach[a, b]` [m] widens
@@ -94,6 +102,9 @@ class VerletList:
         self.history_signs = np.asarray(history_signs, dtype=np.float64).reshape(-1)
         self.cohesion_reach = (np.zeros((1, 1)) if cohesion_reach is None
                                else np.ascontiguousarray(cohesion_reach, dtype=np.float64))
+        # What `partners` and `history` are views of (build).
+        self._partner_buffer = np.zeros(0, dtype=np.int32)
+        self._history_buffer = np.zeros((0, len(self.history_signs)))
         self._clear()
 
     def _clear(self):
@@ -127,25 +138,32 @@ class VerletList:
         cell_size = 2.0 * float(state.radii.max()) + skin + self.largest_reach
         lower, cell_size, dimensions = cell_grid(state.positions, cell_size)
         cells = cell_indices(state.positions, lower, cell_size, dimensions)
-        order = np.argsort(cells, kind="stable")
-        sorted_cells = np.ascontiguousarray(cells[order])
-        starts = cell_starts(sorted_cells, int(np.prod(dimensions)))
+        order, starts = sort_by_cell(cells, int(np.prod(dimensions)))
+        sorted_cells = cells[order]
         offsets = np.empty(count + 1, dtype=np.int64)
-        # One pass when the capacity guess (last size + margin) suffices, two otherwise.
-        partners = np.empty(int(1.25 * self.pair_count) + 4 * count, dtype=np.int32)
         sorted_materials = (state.material_index[order] if self.cohesion_reach.shape[0] > 1
                             else np.zeros(count, np.int32))
         arguments = (np.ascontiguousarray(state.positions[order]), state.radii[order], skin, state.owned_count,
                      order, sorted_cells, starts, dimensions, _FORWARD_OFFSETS, sorted_materials,
-                     self.cohesion_reach, offsets)
-        needed = _fill_pairs(*arguments, partners)
-        if needed > len(partners):
-            partners = np.empty(needed, dtype=np.int32)
-            _fill_pairs(*arguments, partners)
+                     self.cohesion_reach, self.largest_reach > 0.0, offsets)
+        # The partners and the history are the leading rows of buffers kept from build to build: megabyte
+        # arrays allocated afresh at every rebuild cost page faults (or heap fragments that stay resident).
+        # The old list is dead here (its records were taken).  One pass when the capacity guess (last
+        # size + margin) suffices, two otherwise.
+        capacity = int(1.25 * self.pair_count) + 4 * count
+        if not capacity <= len(self._partner_buffer) <= _LARGEST_BUFFER_SLACK * capacity:
+            self._partner_buffer = np.empty(capacity, dtype=np.int32)
+        needed = _fill_pairs(*arguments, self._partner_buffer)
+        if needed > len(self._partner_buffer):
+            self._partner_buffer = np.empty(int(1.25 * needed), dtype=np.int32)
+            _fill_pairs(*arguments, self._partner_buffer)
+        if not needed <= len(self._history_buffer) <= _LARGEST_BUFFER_SLACK * needed + 1024:
+            self._history_buffer = np.empty((int(1.1 * needed) + 1024, len(self.history_signs)))
         self.row_particles = order
         self.offsets = offsets
-        self.partners = partners[:needed].copy()
-        self.history = np.zeros((needed, len(self.history_signs)))
+        self.partners = self._partner_buffer[:needed]
+        self.history = self._history_buffer[:needed]
+        self.history[:] = 0.0
         self._restore(state.ids, state.owned_count, records)
         self._loaded_records = None
         self.builds += 1

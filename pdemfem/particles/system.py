@@ -36,14 +36,14 @@ from pdemfem.contact import layout
 from pdemfem import state_dict as kinds
 from pdemfem.contact.forces import pair_forces, plane_wall_forces
 from pdemfem.contact.registry import history_signs
-from pdemfem.neighbors.cells import cell_grid, cell_indices
+from pdemfem.neighbors.cells import cell_grid, cell_indices, out_of_order_runs, sort_by_cell
 from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import Decomposition, recursive_bisection
 from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.parallel.reductions import StepReductions
 from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES, HeatLedger, heat_content, update_temperatures
-from pdemfem.particles.integrate import drift, kick
+from pdemfem.particles.integrate import kick, kick_drift, outside_domain
 
 log = logging.getLogger("pdemfem")
 
@@ -55,7 +55,7 @@ log = logging.getLogger("pdemfem")
 PARTICLE_COST = 5.0
 CONTACT_COST = 12.0
 
-# Re-sort the owned particles by cell when more than this fraction is out of cell order.
+# Re-sort the owned particles by cell when the cell order has more breaks than this fraction of them.
 REORDER_FRACTION = 0.1
 
 
@@ -105,6 +105,7 @@ class ParticleSystem(kinds.StateComponent):
         self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift
         self.fastest_speed = 0.0  # largest particle speed at the last energies() call
         self.rebalances = 0
+        self._owned_loads_zeroed = False  # set by step() between its kick_drift and the force evaluation
         self.reductions = StepReductions()  # the step's two collectives: one MAX, one SUM
         # `largest_radius`: of the particles inserted later (streams), which the ghost cutoff must cover too.
         largest_radius = max(float(state.radii.max()) if state.count else 0.0, float(largest_radius))
@@ -142,9 +143,12 @@ class ParticleSystem(kinds.StateComponent):
     def step(self) -> None:
         state, dt = self.state, self.dt
         owned = state.owned_count
-        kick(owned, state.velocities, state.angular_velocities, state.forces, state.torques, state.inverse_mass,
-             state.inverse_inertia, self.gravity, 0.5 * dt)
-        largest_displacement_squared = drift(owned, state.positions, state.velocities, dt, state.positions_at_build)
+        largest_displacement_squared = kick_drift(owned, state.positions, state.velocities, state.angular_velocities,
+                                                  state.forces, state.torques, state.inverse_mass,
+                                                  state.inverse_inertia, self.gravity, 0.5 * dt, dt,
+                                                  state.positions_at_build)
+        # kick_drift zeroed the owned rows' loads; a rebuild (new rows, new order) clears this.
+        self._owned_loads_zeroed = True
         if self.comm.size > 1:
             largest_displacement_squared = self.reductions.largest(self.comm, largest_displacement_squared)
         # Read by the run monitor's runaway stop (same value on every rank).
@@ -168,10 +172,11 @@ class ParticleSystem(kinds.StateComponent):
         # Work done on the particles by moving walls, -F_wall . v_wall: the trapezoid of the powers at the
         # force evaluations before and after the walls' move (velocity Verlet's kinetic energy takes the two
         # forces' mean; one force booked the step's work a step early: a first-order error wherever a wall's
-        # force jumps, e.g. a grain on a conveyor turning from slipping to rolling).
-        power = self._plane_power()
-        self.walls.work += 0.5 * (self.walls.previous_power + power) * dt
-        self.walls.previous_power = power
+        # force jumps, e.g. a grain on a conveyor turning from slipping to rolling).  Walls at rest: nothing.
+        if self.walls.velocities.any():
+            power = self._plane_power()
+            self.walls.work += 0.5 * (self.walls.previous_power + power) * dt
+            self.walls.previous_power = power
 
     def _plane_power(self) -> float:
         return -float(np.sum(self.walls.forces * self.walls.velocities))
@@ -266,6 +271,7 @@ class ParticleSystem(kinds.StateComponent):
     def _rebuild(self, force_rebalance: bool = False, records=None, canonical: bool = False) -> None:
         """Migrate, (re)balance, sort, exchange ghosts and rebuild the list, keeping contact history."""
         state = self.state
+        self._owned_loads_zeroed = False
         if records is None:
             records = self.neighbors.contact_records(state.ids, state.owned_count)
         # Per-particle cost only matters for balancing several ranks.
@@ -349,13 +355,10 @@ class ParticleSystem(kinds.StateComponent):
 
         Returns the mask of the owned particles that stayed."""
         state = self.state
-        positions = state.positions[:state.owned_count]
         bounded = np.isfinite(self.domain_lower) & (self.periodic_lengths == 0)
-        outside = ~np.all(np.isfinite(positions), axis=1)
-        if np.any(bounded):
-            outside |= np.any((positions < self.domain_lower) & bounded, axis=1)
-            outside |= np.any((positions > self.domain_upper) & bounded, axis=1)
-        counts = np.array([np.count_nonzero(outside), np.count_nonzero(~np.all(np.isfinite(positions), axis=1))])
+        outside, nonfinite = outside_domain(state.owned_count, state.positions, self.domain_lower,
+                                            self.domain_upper, bounded)
+        counts = np.array([np.count_nonzero(outside), nonfinite])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
         lost, nonfinite = int(counts[0]), int(counts[1])
@@ -374,18 +377,20 @@ class ParticleSystem(kinds.StateComponent):
         if state.owned_count < 2:
             return
         lower, size, dimensions = cell_grid(state.positions, 2.0 * self.largest_radius + self.skin)
-        permutation = np.argsort(cell_indices(state.positions, lower, size, dimensions), kind="stable")
+        permutation, _ = sort_by_cell(cell_indices(state.positions, lower, size, dimensions), int(np.prod(dimensions)))
         # The sort only buys memory locality (the list build bins by cell itself): skip the copy of
-        # every per-particle array while few particles are out of cell order.
-        out_of_place = np.count_nonzero(permutation != np.arange(state.owned_count))
-        if out_of_place > REORDER_FRACTION * state.owned_count:
+        # every per-particle array while few rows break the cell order.
+        if out_of_order_runs(permutation) > REORDER_FRACTION * state.owned_count:
             state.reorder(permutation)
 
     # ---------------------------------------------------------------- forces
     def _compute_forces(self) -> None:
         state, tables, walls, neighbors = self.state, self.tables, self.walls, self.neighbors
-        state.forces[:] = 0.0
-        state.torques[:] = 0.0
+        # Since the step's kick_drift only the ghost rows' loads are left to zero (one pass fewer over memory).
+        first = state.owned_count if self._owned_loads_zeroed else 0
+        self._owned_loads_zeroed = False
+        state.forces[first:] = 0.0
+        state.torques[first:] = 0.0
         walls.forces[:] = 0.0
         owned = state.owned_count
         if self.heat:

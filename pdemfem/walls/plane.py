@@ -24,6 +24,7 @@ class PlaneWalls(kinds.StateComponent):
                              dtype=float).reshape(count, 3)
         transport -= np.sum(transport * self.normals, axis=1)[:, None] * self.normals
         self.velocities = self.motion + transport
+        self._moving = bool(np.any(self.motion))
         self.material_index = np.array([material_names.index(wall.material) for wall in wall_configs],
                                        dtype=np.int32)
         self.forces = np.zeros((count, 3))
@@ -44,10 +45,12 @@ class PlaneWalls(kinds.StateComponent):
         return len(self.names)
 
     def move(self, dt: float) -> None:
-        self.points += dt * self.motion
+        if self._moving:
+            self.points += dt * self.motion
 
     def largest_displacement_since_build(self) -> float:
-        if not self.count:
+        # Called every step: planes that never move (most scenes) skip the numpy passes.
+        if not self.count or not self._moving:
             return 0.0
         return float(np.sqrt(np.max(np.sum((self.points - self.points_at_build) ** 2, axis=1))))
 

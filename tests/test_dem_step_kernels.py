@@ -1,0 +1,144 @@
+"""The DEM step's helper kernels against the plain numpy (or previous) computations they replace.
+
+Each must give exactly the same result (they only change how it is computed): the cell sort and cell
+starts, the out-of-domain mask, the fused first half kick + drift, and the contact-history restore
+(records grouped by owner instead of a hash table), including duplicate records (the first wins),
+pairs seen from a ghost (the springs flip) and ids too sparse for an id-indexed table.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pdemfem.neighbors.cells import cell_starts, out_of_order_runs, sort_by_cell
+from pdemfem.neighbors.history import collect_records, restore_records
+from pdemfem.particles.integrate import drift, kick, kick_drift, outside_domain
+
+
+@pytest.mark.parametrize("count, cells", [(0, 4), (1, 1), (500, 40), (3000, 20000)])
+def test_sort_by_cell_is_a_stable_argsort(count, cells):
+    rng = np.random.default_rng(count)
+    indices = rng.integers(0, cells, count).astype(np.int64)
+    order, starts = sort_by_cell(indices, cells)
+    assert np.array_equal(order, np.argsort(indices, kind="stable"))
+    expected_starts = np.searchsorted(indices[order], np.arange(cells + 1))
+    assert np.array_equal(starts, expected_starts)
+    assert np.array_equal(cell_starts(indices[order], cells), expected_starts)
+
+
+def test_out_of_order_runs_counts_breaks():
+    assert out_of_order_runs(np.arange(6)) == 0
+    # One particle moved three rows down: three breaks, not the four rows whose index changed.
+    assert out_of_order_runs(np.array([0, 2, 3, 4, 1, 5])) == 3
+
+
+def test_outside_domain_matches_numpy():
+    rng = np.random.default_rng(3)
+    positions = rng.uniform(-6.0, 6.0, (400, 3))
+    positions[7, 1] = np.nan
+    positions[9] = [np.inf, 100.0, -np.inf]  # not finite and out of bounds: removed and counted once
+    lower = np.array([-5.0, -np.inf, -5.0])
+    upper = np.array([5.0, np.inf, 4.0])
+    bounded = np.array([True, False, True])
+    owned = 390
+    mask, nonfinite = outside_domain(owned, positions, lower, upper, bounded)
+    owned_positions = positions[:owned]
+    finite = np.all(np.isfinite(owned_positions), axis=1)
+    with np.errstate(invalid="ignore"):
+        expected = ~finite | np.any(((owned_positions < lower) | (owned_positions > upper)) & bounded, axis=1)
+    assert np.array_equal(mask, expected)
+    assert nonfinite == np.count_nonzero(~finite) == 2
+
+
+def test_kick_drift_equals_kick_then_drift():
+    rng = np.random.default_rng(5)
+    count, owned = 50, 45
+    arrays = {name: rng.normal(size=(count, 3)) for name in
+              ("positions", "velocities", "angular_velocities", "forces", "torques", "positions_at_build")}
+    inverse_mass = rng.uniform(1.0, 3.0, count)
+    inverse_inertia = rng.uniform(1.0, 3.0, count)
+    gravity = np.array([0.0, 0.0, -9.81])
+    dt = 1e-3
+    separate = {name: values.copy() for name, values in arrays.items()}
+    kick(owned, separate["velocities"], separate["angular_velocities"], separate["forces"], separate["torques"],
+         inverse_mass, inverse_inertia, gravity, 0.5 * dt)
+    largest = drift(owned, separate["positions"], separate["velocities"], dt, separate["positions_at_build"])
+    fused = {name: values.copy() for name, values in arrays.items()}
+    fused_largest = kick_drift(owned, fused["positions"], fused["velocities"], fused["angular_velocities"],
+                               fused["forces"], fused["torques"], inverse_mass, inverse_inertia, gravity, 0.5 * dt,
+                               dt, fused["positions_at_build"])
+    # Bit-identical: the same operations in the same order.
+    assert fused_largest == largest
+    for name in ("positions", "velocities", "angular_velocities"):
+        assert np.array_equal(fused[name], separate[name]), name
+    # The loads of the owned rows are used up (zeroed for the next evaluation); the ghost rows' are untouched.
+    for name in ("forces", "torques"):
+        assert not np.any(fused[name][:owned])
+        assert np.array_equal(fused[name][owned:], arrays[name][owned:])
+
+
+def _hash_restore(row_particles, offsets, partners, history, ids, owned_count, records, signs):
+    """The reference: for every listed pair, the first record with its (owner id, partner id)."""
+    first_record = {}
+    for k in range(len(records)):
+        first_record.setdefault((int(records[k, 0]), int(records[k, 1])), k)
+    for r, i in enumerate(row_particles):
+        for row in range(offsets[r], offsets[r + 1]):
+            j = partners[row]
+            flipped = i >= owned_count
+            key = (int(ids[j]), int(ids[i])) if flipped else (int(ids[i]), int(ids[j]))
+            k = first_record.get(key)
+            if k is not None:
+                values = records[k, 2:]
+                history[row] = signs * values if flipped else values
+
+
+def _random_list(rng, count, owned_count):
+    """A half list over `count` rows (the first `owned_count` owned) without ghost-ghost pairs."""
+    row_particles = rng.permutation(count)
+    offsets = [0]
+    partners = []
+    for r, i in enumerate(row_particles):
+        later = row_particles[r + 1:]
+        if i >= owned_count:
+            later = later[later < owned_count]
+        chosen = rng.choice(later, size=min(len(later), int(rng.integers(0, 5))), replace=False)
+        partners.extend(chosen)
+        offsets.append(len(partners))
+    return row_particles.astype(np.int64), np.array(offsets, dtype=np.int64), np.array(partners, dtype=np.int32)
+
+
+@pytest.mark.parametrize("id_stride", [1, 1000])  # dense ids (an id-indexed table) and sparse (binary search)
+def test_restore_records_matches_a_lookup_by_pair(id_stride):
+    rng = np.random.default_rng(id_stride)
+    count, owned_count, width = 300, 240, 4
+    signs = np.array([-1.0, -1.0, -1.0, 1.0])
+    ids = (rng.permutation(count) * id_stride + 17).astype(np.int64)
+    row_particles, offsets, partners = _random_list(rng, count, owned_count)
+    history = rng.normal(size=(len(partners), width))
+    history[rng.random(len(partners)) < 0.4] = 0.0  # pairs apart: no record
+    records = collect_records(row_particles, offsets, partners, history, ids, owned_count, signs)
+    assert len(records) > 100
+    # Shuffled, some lost, some duplicated with other values after the originals (the originals win),
+    # and records of a particle not held here.
+    records = records[rng.permutation(len(records))][10:]
+    duplicates = records[:20].copy()
+    duplicates[:, 2:] += 1.0
+    stranger = np.array([[10 ** 9, ids[0], 1.0, 2.0, 3.0, 4.0]])
+    records = np.ascontiguousarray(np.concatenate([records, duplicates, stranger]))
+    # The new list: the same pairs, each seen from either particle, rows in another order.
+    first = np.repeat(row_particles, np.diff(offsets))
+    swap = rng.random(len(partners)) < 0.5
+    rows_of = {}
+    for a, b, flip in zip(first, partners, swap):
+        a, b = (int(b), int(a)) if flip else (int(a), int(b))
+        rows_of.setdefault(a, []).append(b)
+    row_particles = rng.permutation(count).astype(np.int64)
+    partners = np.array([b for a in row_particles for b in rows_of.get(int(a), [])], dtype=np.int32)
+    offsets = np.concatenate([[0], np.cumsum([len(rows_of.get(int(a), [])) for a in row_particles])]).astype(np.int64)
+    expected = np.zeros((len(partners), width))
+    _hash_restore(row_particles, offsets, partners, expected, ids, owned_count, records, signs)
+    restored = np.zeros((len(partners), width))
+    restore_records(row_particles, offsets, partners, restored, ids, owned_count, records, signs)
+    assert np.count_nonzero(np.any(expected != 0.0, axis=1)) > 20
+    assert np.array_equal(restored, expected)
