@@ -1,6 +1,6 @@
 """MPI case: uninterrupted run or restart of restart_scenes.pile_scene, final state to an .npz.
 
-    restart_case.py OUT STEPS CHECKPOINT_STEPS RESULT.npz [--restart FILE] [--element P2] [--cohesive] [--heated] [--moving]
+    restart_case.py OUT STEPS CHECKPOINT_STEPS RESULT.npz [--restart FILE] [--element P2] [--cohesive] [--heated] [--moving] [--free-axle]
 
 The uninterrupted run writes checkpoints every CHECKPOINT_STEPS; with --restart the run
 continues from FILE to the same end.  Rank 0 writes the state (sorted by id) to RESULT.npz.
@@ -27,6 +27,8 @@ if "--heated" in sys.argv:
     scene = restart_scenes.heated(scene)
 if "--moving" in sys.argv:
     scene = restart_scenes.moving(scene)
+if "--free-axle" in sys.argv:
+    scene = restart_scenes.free_axle(scene)
 with restart_scenes.cross_rank_static_solve():  # compared with other rank counts to round-off
     simulation = Simulation.from_dict(scene, comm=comm, base_dir=out, restart=restart)
 simulation.run(progress=False)

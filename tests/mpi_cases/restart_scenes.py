@@ -89,6 +89,14 @@ def moving(scene: dict) -> dict:
     return scene
 
 
+def free_axle(scene: dict) -> dict:
+    """The moving pile with the plate's axis free along z under a carried mass (sinking under gravity and the
+    grains' impacts): the axis's height, rate and acceleration in the checkpoint, one reduction per advance."""
+    scene = moving(scene)
+    scene["solids"][0]["motion"]["carried_mass"] = 5.0
+    return scene
+
+
 def gather_state(simulation) -> dict | None:
     """Everything compared between runs, gathered to rank 0 and sorted by particle id."""
     comm = simulation.comm
