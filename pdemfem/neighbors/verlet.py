@@ -142,6 +142,11 @@ class VerletList:
         if needed > len(partners):
             partners = np.empty(needed, dtype=np.int32)
             _fill_pairs(*arguments, partners)
+        body = state.fields.get("clump_body")
+        if body is not None:  # members of one rigid clump never interact (pdemfem.clumps.bodies)
+            from pdemfem.clumps.bodies import drop_same_body_pairs
+
+            needed = drop_same_body_pairs(order, offsets, partners, body)
         self.row_particles = order
         self.offsets = offsets
         self.partners = partners[:needed].copy()
