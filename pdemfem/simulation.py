@@ -116,11 +116,6 @@ class Simulation:
     def _build_particles(self) -> ParticleSystem:
         scene = self.scene
         validate_scene_coordinates(scene)  # before the insertion bins them (as `pdemfem check`)
-        clump_groups = [index for index, group in enumerate(scene.particles) if group.clump is not None]
-        if clump_groups and self.comm.size > 1:
-            raise SceneError(f"particles[{clump_groups[0]}].clump",
-                             f"clumps run on one rank only for now (this run has {self.comm.size} ranks)",
-                             "run the scene on one rank (pdemfem.launch -n 1), or use spheres")
         inserted = insert_particles(scene)
         # Streams insert particles later (pdemfem.particles.stream): their radii count for the skin and cutoffs.
         streamed = stream_radius_range(scene)

@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,11 +12,9 @@ from pdemfem.clumps.quaternion import quaternion_from_axis_angle, rotation_matri
 from pdemfem.clumps.template import clump_template
 from pdemfem.errors import SceneError
 from pdemfem.particles.insert import first_overlap, insert_particles
-from pdemfem.runtime import mpiexec_command, process_environment
 from pdemfem.scene.loader import load_scene
 from test_clumps_fill import box_mesh, write_stl
 
-ROOT = Path(__file__).resolve().parent.parent
 RADIUS = 1e-3
 SPHERES = [{"position": [0, 0, 0], "radius": RADIUS}, {"position": [1.5 * RADIUS, 0, 0], "radius": 0.7 * RADIUS},
            {"position": [0, 1.2 * RADIUS, 0.3 * RADIUS], "radius": 0.6 * RADIUS}]
@@ -151,17 +147,3 @@ def test_a_clump_filled_from_a_surface_file(tmp_path):
     with pytest.raises(SceneError) as caught:
         load_scene(path)
     assert "missing.stl" in str(caught.value)
-
-
-@pytest.mark.mpi
-def test_clumps_on_two_ranks_are_refused_with_exit_2(tmp_path):
-    data = scene({"kind": "list", "positions": [[0, 0, 0.002]]}, {"spheres": SPHERES})
-    data["output"] = {"dir": "out", "every": 0.005, "particles": []}
-    (tmp_path / "scene.yaml").write_text(yaml.safe_dump(data))
-    environment = process_environment()
-    environment["PYTHONPATH"] = str(ROOT)
-    command = mpiexec_command(2, [sys.executable, "-m", "pdemfem.cli", "run", "scene.yaml"])
-    completed = subprocess.run(command, env=environment, cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    assert completed.returncode == 2, completed.stderr
-    output = completed.stdout + completed.stderr
-    assert output.count("clumps run on one rank only") == 1 and "particles[0].clump" in output

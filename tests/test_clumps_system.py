@@ -194,7 +194,7 @@ def test_a_clump_leaving_the_domain_is_removed_whole(tmp_path):
     assert sim.particle_count() == 2 and sim.particle_system.lost_particles == 2
     np.testing.assert_allclose(np.sort(sim.particles.positions[:, 0]), [-RADIUS, RADIUS], atol=1e-15)
     body = sim.particle_system.state.fields[BODY_FIELD]
-    assert list(body[:sim.particle_system.state.owned_count]) == [0, 0]
+    assert list(body[:sim.particle_system.state.owned_count]) == [1, 1]  # the body id
 
 
 # ------------------------------------------------------------------ time step

@@ -3,8 +3,8 @@
 The member spheres of every clump are ordinary rows of the ParticleState (the contact code sees
 spheres).  Two per-particle fields tie them to their body:
 
-    clump_body    int64, the body's index in these arrays (-1: a single sphere); sent to ghosts
-                  (the neighbour list leaves out the pairs of one body, pdemfem.neighbors.verlet)
+    clump_body    int64, the body's global id (-1: a single sphere); sent to ghosts (the neighbour
+                  list leaves out the pairs of one body, pdemfem.neighbors.verlet)
     clump_offset  (3,) the member's centre relative to the body's centre of mass, body principal frame
 
 A member's row carries its mass share (pdemfem.clumps.template) as its mass and 2/5 share r^2 as
@@ -20,12 +20,18 @@ its inertia, which the contact laws read; the sphere integrator skips members.  
 The kick formulas are those of pdemfem.particles.integrate, so a clump of one sphere follows the
 sphere's translation bit for bit (its rotation goes through L = I omega: equal to round-off).
 
-Serial only for now: a body and all its members must be on one rank (Simulation refuses clumps
-on more than one rank).
+Ranks: a body belongs to the rank whose box holds its centre of mass, and so do all its members
+(owned rows there, wherever they stick out); at a list rebuild the members migrate to their body's
+owner (`member_destinations`) and the bodies follow (`migrate_bodies`).  Members reach the other
+ranks as ghosts by position like any particle; the ghost cutoff is widened by twice the largest
+member offset (a member sticks out of its owner's box by at most that, and so may its partner).
+After the insertion and after a checkpoint is read every rank holds every body (`replicated`);
+the next rebuild keeps each rank's own.  Body arrays are kept in id order.
 """
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 from numba import njit
 
 from pdemfem import state_dict as kinds
@@ -147,7 +153,10 @@ class ClumpBodies(kinds.StateComponent):
                                         self.principal_moments, self.angular_momenta)
         self.forces = np.zeros((self.count, 3))
         self.torques = np.zeros((self.count, 3))
-        self.lost = 0  # bodies removed (a member left domain.box)
+        self.lost = 0  # bodies removed on this rank (a member left domain.box)
+        # Every rank holds every body (after the insertion or a checkpoint read) until the next rebuild.
+        self.replicated = True
+        self.comm = None  # set by the particle system
         self._derive()
         self.member_rows = np.zeros(0, dtype=np.int64)
 
@@ -173,7 +182,8 @@ class ClumpBodies(kinds.StateComponent):
     # ------------------------------------------------------------------ members
     @staticmethod
     def attach(state, member_body, member_offsets, member_mass) -> None:
-        """Register the member fields on `state` (rows as inserted) and give members their mass shares."""
+        """Register the member fields on `state` (rows as inserted; member_body: body ids, -1 for a
+        single sphere) and give members their mass shares."""
         body = state.add_field(BODY_FIELD, (), np.int64, fill=-1, ghost_rebuild=True)
         body[:] = member_body
         state.add_field(OFFSET_FIELD, (3,))[:] = member_offsets
@@ -182,11 +192,68 @@ class ClumpBodies(kinds.StateComponent):
         state.inverse_mass[members] = 1.0 / state.mass[members]
         state.inverse_inertia[members] = 1.0 / (0.4 * state.mass[members] * state.radii[members] ** 2)
 
+    def local_index(self, body_ids) -> np.ndarray:
+        """Index in these (id-sorted) arrays of bodies by id; every id must be held here."""
+        index = np.searchsorted(self.ids, body_ids)
+        if len(body_ids) and (index.max() >= self.count or np.any(self.ids[index] != body_ids)):
+            raise RuntimeError("a clump member's body is not on its rank")
+        return index.astype(np.int64)
+
+    @staticmethod
+    def protrusion(state, comm) -> float:
+        """Largest distance of a member centre from its body's centre of mass (over the ranks)."""
+        offsets = state.fields[OFFSET_FIELD][:state.owned_count]
+        local = float(np.sqrt((offsets ** 2).sum(axis=1).max())) if len(offsets) else 0.0
+        return comm.allreduce(local, op=MPI.MAX) if comm.size > 1 else local
+
+    def member_destinations(self, state, destinations, decomposition) -> np.ndarray:
+        """Rank of every owned row at a rebuild: a member goes to its body's owner."""
+        body = state.fields[BODY_FIELD][:state.owned_count]
+        members = np.flatnonzero(body >= 0)
+        if len(members):
+            destinations = destinations.copy()
+            centres = self.positions[self.local_index(body[members])]
+            destinations[members] = decomposition.owners(centres)
+        return destinations
+
+    _ARRAYS = ("ids", "group_index", "positions", "orientations", "velocities", "masses", "principal_moments",
+               "principal_orientations", "angular_momenta", "forces", "torques")
+
+    def _keep(self, rows) -> None:
+        for name in self._ARRAYS:
+            setattr(self, name, np.ascontiguousarray(getattr(self, name)[rows]))
+
+    def _sort(self) -> None:
+        self._keep(np.argsort(self.ids, kind="stable"))
+        self._derive()
+
+    def migrate_bodies(self, comm, decomposition) -> None:
+        """Collective, at a rebuild after the members moved: every body to the rank owning its centre."""
+        owners = decomposition.owners(self.positions) if self.count else np.zeros(0, dtype=np.int64)
+        if self.replicated:  # every rank holds them all: keep one's own
+            self._keep(np.flatnonzero(owners == comm.rank))
+            self.replicated = False
+            self._sort()
+            return
+        outgoing = [None] * comm.size
+        for rank in range(comm.size):
+            if rank != comm.rank:
+                rows = np.flatnonzero(owners == rank)
+                outgoing[rank] = {name: getattr(self, name)[rows] for name in self._ARRAYS} if len(rows) else None
+        incoming = comm.alltoall(outgoing)
+        self._keep(np.flatnonzero(owners == comm.rank))
+        for received in incoming:
+            if received is not None:
+                for name in self._ARRAYS:
+                    setattr(self, name, np.concatenate([getattr(self, name), received[name]]))
+        self._sort()
+
     def refresh_rows(self, state) -> None:
         """After a rebuild (rows sorted, removed, appended): the owned member rows and their body data."""
+        self.replicated = False
         body = state.fields[BODY_FIELD][:state.owned_count]
         self.member_rows = np.flatnonzero(body >= 0).astype(np.int64)
-        self.member_body = np.ascontiguousarray(body[self.member_rows])
+        self.member_body = self.local_index(body[self.member_rows])
         self.member_offsets = np.ascontiguousarray(state.fields[OFFSET_FIELD][self.member_rows])
         count = len(self.member_rows)
         self._member_positions = np.zeros((count, 3))
@@ -257,21 +324,13 @@ class ClumpBodies(kinds.StateComponent):
     def remove_leaving(self, state, outside: np.ndarray) -> np.ndarray:
         """`outside` (owned rows leaving) grown to every member of a body one of whose members leaves;
         those bodies are dropped and the remaining members' body indices renumbered."""
-        body = state.fields[BODY_FIELD]
-        owned = state.owned_count
-        leaving_members = outside & (body[:owned] >= 0)
-        if not leaving_members.any():
+        body = state.fields[BODY_FIELD][:state.owned_count]
+        leaving = np.unique(body[outside & (body >= 0)])
+        if not len(leaving):
             return outside
-        gone = np.zeros(self.count, dtype=bool)
-        gone[body[:owned][leaving_members]] = True
-        outside = outside | ((body[:owned] >= 0) & gone[np.maximum(body[:owned], 0)])
-        renumber = np.cumsum(~gone) - 1
-        members = body >= 0
-        body[members] = np.where(gone[body[members]], -1, renumber[body[members]])
-        kept = ~gone
-        for name in ("ids", "group_index", "positions", "orientations", "velocities", "masses", "principal_moments",
-                     "principal_orientations", "angular_momenta", "forces", "torques"):
-            setattr(self, name, np.ascontiguousarray(getattr(self, name)[kept]))
+        outside = outside | np.isin(body, leaving)
+        gone = np.isin(self.ids, leaving)
+        self._keep(np.flatnonzero(~gone))
         self.lost += int(gone.sum())
         self._derive()
         return outside
@@ -281,9 +340,17 @@ class ClumpBodies(kinds.StateComponent):
                "principal_moments", "principal_orientations", "forces", "torques")
 
     def state_dict(self) -> dict:
-        """Every body array (identical on the one rank that runs clumps) and the count of lost bodies."""
-        result = {name: kinds.global_array(getattr(self, name)) for name in self._STORED}
-        result["lost"] = kinds.scalar(int(self.lost))
+        """Collective: the bodies' arrays as a table keyed by the rank of each id among all bodies
+        (the file does not depend on the rank count), and the count of lost bodies."""
+        comm = self.comm
+        if comm is not None and comm.size > 1:
+            every = np.sort(np.concatenate(comm.allgather(self.ids)))
+            lost = comm.allreduce(int(self.lost))
+        else:
+            every, lost = self.ids, int(self.lost)
+        keys = np.searchsorted(every, self.ids)
+        result = {name: kinds.keyed_slab(getattr(self, name), keys) for name in self._STORED}
+        result["lost"] = kinds.scalar(lost)
         return result
 
     def load_state_dict(self, stored: dict) -> None:
@@ -294,8 +361,10 @@ class ClumpBodies(kinds.StateComponent):
             current = getattr(self, name)
             values = np.asarray(stored[name], dtype=current.dtype)
             setattr(self, name, np.ascontiguousarray(values.reshape((-1, *current.shape[1:]))))
-        self.lost = int(stored["lost"])
-        self._derive()
+        # The total is counted once, on rank 0.
+        self.lost = int(stored["lost"]) if self.comm is None or self.comm.rank == 0 else 0
+        self.replicated = True
+        self._sort()
 
 
 @njit(cache=True)

@@ -27,6 +27,7 @@ particles beyond the domain box or in an outlet (pdemfem.particles.outlet) are r
 Rigid clumps (pdemfem.clumps.bodies.ClumpBodies, `clumps`): their member spheres are rows of the
 state; the clumps integrate the free spheres and the bodies (members follow their bodies) and sum
 the members' loads onto the bodies after the contacts.  A clump leaving the domain box is removed whole.
+A body and its members belong to the rank owning its centre of mass; whole bodies migrate at rebuilds.
 """
 from __future__ import annotations
 
@@ -120,6 +121,11 @@ class ParticleSystem(kinds.StateComponent):
         # A ghost is needed when it can touch (or, cohesive, still hold on to) an owned particle before the
         # next rebuild.
         self.ghost_cutoff = 2.0 * self.largest_radius + self.skin + tables.cohesion_reach
+        if clumps is not None:
+            # A member is owned by its body's rank and sticks out of that rank's box by up to its offset
+            # from the centre of mass; so may the partner it touches on the other side of a cut.
+            clumps.comm = comm
+            self.ghost_cutoff += 2.0 * clumps.protrusion(state, comm)
         self._check_periodic_lengths()
         self._rebuild(force_rebalance=True)
         self._compute_forces()
@@ -297,7 +303,11 @@ class ParticleSystem(kinds.StateComponent):
                 self._pending_rebalance_log = before
             if self.comm.size > 1:
                 destinations = self.decomposition.owners(state.positions)
+                if self.clumps is not None:  # members go with their bodies, whole bodies move
+                    destinations = self.clumps.member_destinations(state, destinations, self.decomposition)
                 records = migrate(self.comm, state, destinations, records)
+                if self.clumps is not None:
+                    self.clumps.migrate_bodies(self.comm, self.decomposition)
         if canonical and state.owned_count:
             state.reorder(np.argsort(state.ids, kind="stable"))  # the cell sort is stable: ties by id
         self._sort_owned()
