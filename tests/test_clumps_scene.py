@@ -146,3 +146,14 @@ def test_a_clump_filled_from_a_surface_file(tmp_path):
     with pytest.raises(SceneError) as caught:
         load_scene(path)
     assert "missing.stl" in str(caught.value)
+
+
+def test_a_region_thinner_than_a_clump_or_too_full_is_refused():
+    thin = {"kind": "random", "count": 2, "region": {"box": [[0, 0, 0], [0.02, 0.02, 0.003]]}}
+    with pytest.raises(SceneError) as caught:
+        insert_particles(load_scene(scene(thin, {"spheres": SPHERES}))[0])
+    assert "particles[0].insert.region.box" in str(caught.value) and "thinner than one clump" in str(caught.value)
+    full = {"kind": "random", "count": 200, "max_attempts": 50, "region": {"box": [[0, 0, 0], [0.01, 0.01, 0.01]]}}
+    with pytest.raises(SceneError) as caught:
+        insert_particles(load_scene(scene(full, {"spheres": SPHERES}))[0])
+    assert "particles[0].insert.count" in str(caught.value) and "of 200 clumps" in str(caught.value)
