@@ -157,7 +157,6 @@ class Simulation:
                 member_mass[rows] = np.tile(template.member_mass, len(rows) // len(template.member_mass))
             ClumpBodies.attach(state, inserted.member_body[mine], inserted.member_offsets[mine], member_mass[mine])
             clumps = ClumpBodies.from_insertion(inserted.clumps)
-        self.clump_bodies = clumps
         count = total
         walls = PlaneWalls(plane_walls, tables.material_names)
         # Mesh and cylinder walls, and the solids' contact surfaces, plug into the particle system as contributors.
@@ -400,7 +399,7 @@ class Simulation:
 
     @property
     def clumps(self):
-        """The rigid clumps (copies): ids, positions (centres of mass), orientations (unit quaternions
+        """The rigid clumps this rank owns (copies): ids, positions (centres of mass), orientations (unit quaternions
         w, x, y, z turning the clump frame of the scene's spheres into the world), velocities,
         angular_velocities (world frame), masses and principal_inertia (principal moments, ascending).
         Empty arrays without clumps.  `particles` holds their member spheres."""

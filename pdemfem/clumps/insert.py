@@ -123,7 +123,8 @@ def _random_clumps(group, where, template, placed_positions, placed_radii):
     centres, orientations, placed = _random_place_clumps(
         low + extent, high - extent, int(insert.count), np.ascontiguousarray(template.member_offsets),
         np.ascontiguousarray(template.member_radii), given, use_given,
-        np.ascontiguousarray(placed_positions, dtype=float).reshape(-1, 3), np.ascontiguousarray(placed_radii, dtype=float),
+        np.ascontiguousarray(placed_positions, dtype=float).reshape(-1, 3),
+        np.ascontiguousarray(placed_radii, dtype=float),
         cell_size, dimensions, grid_lower, insert.max_attempts, insert.seed)
     if placed < insert.count:
         raise SceneError(f"{where}.insert.count",
@@ -190,7 +191,8 @@ def _random_place_clumps(lower, upper, count, offsets, radii, given, use_given, 
             for m in range(members):
                 for axis in range(3):
                     candidate_members[m, axis] = (centre[axis] + rotation[axis, 0] * offsets[m, 0]
-                                                  + rotation[axis, 1] * offsets[m, 1] + rotation[axis, 2] * offsets[m, 2])
+                                                  + rotation[axis, 1] * offsets[m, 1]
+                                                  + rotation[axis, 2] * offsets[m, 2])
                 c = _cell_of(candidate_members[m], grid_lower, cell_size, dimensions)
                 for dz in range(-1, 2):
                     for dy in range(-1, 2):

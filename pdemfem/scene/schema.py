@@ -192,7 +192,8 @@ class ClumpConfig(StrictModel):
                     "how many spheres fill the surface (docs/shapes.md)")
     file: Optional[str] = Field(
         None, description="a closed surface (STL, .msh) the clump fills with `spheres` spheres, in its frame")
-    scale: PositiveFloat = Field(1.0, description="file: factor applied to the surface's coordinates (e.g. 1e-3 for mm)")
+    scale: PositiveFloat = Field(
+        1.0, description="file: factor applied to the surface's coordinates (e.g. 1e-3 for mm)")
     mass: Optional[PositiveFloat] = Field(
         None, description="the clump's mass [kg]; default: the union of its spheres at the material's density "
                           "(a given mass scales the inertia with it)")
