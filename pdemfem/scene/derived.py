@@ -623,9 +623,12 @@ def memory_estimate_bytes(scene: Scene) -> int:
     list of ~8 entries per particle (int32 partner index, int64 partner id, three
     float64 tangential-history components), its CSR offsets, and 40 % for ghosts,
     the history remap at list rebuild and sort scratch.  Excludes the fixed cost of
-    the interpreter, numba and PETSc (~150-250 MB per rank) and any FEM mesh.
+    the interpreter, numba and PETSc (~150-250 MB per rank) and any FEM mesh.  N counts spheres: a
+    clump's member spheres each (their bodies' arrays are small beside them).
     """
-    return particle_count(scene) * BYTES_PER_PARTICLE
+    spheres = sum(count * (len(clump_group_template(group, None).member_radii) if group.clump is not None else 1)
+                  for group, count in zip(scene.particles, group_counts(scene)))
+    return spheres * BYTES_PER_PARTICLE
 
 
 # --------------------------------------------------------------------------- warnings
