@@ -403,6 +403,12 @@ def _stream_text(insert) -> str:
     return f"stream of {insert.rate:g}/s" if insert.rate is not None else f"stream of {insert.mass_rate:g} kg/s"
 
 
+def _clump_sphere_count(group) -> int:
+    from pdemfem.clumps.template import clump_spheres
+
+    return len(clump_spheres(group.clump)[1])
+
+
 def _report(path, scene, base_dir, placed) -> tuple:
     from pdemfem.scene import derived
     from pdemfem.scene.loader import scene_hash
@@ -411,12 +417,17 @@ def _report(path, scene, base_dir, placed) -> tuple:
     total = derived.particle_count(scene)
     lines = [f"scene: {path} (physics hash {scene_hash(scene)[:12]})"]
     groups = ", ".join(
-        f"{group.name}: {_stream_text(group.insert) if group.insert.kind == 'stream' else count} {group.material}, "
-        f"r = {_radius_text(derived.group_radius_range(group))}"
+        f"{group.name}: {_stream_text(group.insert) if group.insert.kind == 'stream' else count} {group.material}"
+        + (f" clumps of {_clump_sphere_count(group)} spheres" if group.clump is not None else "")
+        + f", r = {_radius_text(derived.group_radius_range(group))}"
         for group, count in zip(scene.particles, counts)
     )
+    spheres = sum(count * _clump_sphere_count(group) for group, count in zip(scene.particles, counts)
+                  if group.clump is not None) + sum(count for group, count in zip(scene.particles, counts)
+                                                    if group.clump is None)
     lines.append(f"particles: {total}" + (f" ({groups})" if groups else "")
-                 + ("" if placed is None or placed == total else f"; inserted {placed}"))
+                 + ("" if placed is None or placed == spheres else f"; inserted {placed}")
+                 + (f"; {spheres} spheres" if spheres != total else ""))
     lines.append(f"walls: {len(scene.walls)}" + (f" ({', '.join(w.name for w in scene.walls)})" if scene.walls else ""))
     models = sorted({interaction.model for interaction in scene.interactions.values()})
     lines.append(f"materials: {', '.join(scene.materials)}; contact models: {', '.join(models)}")

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 from mpi4py import MPI
 
+from pdemfem.clumps.bodies import ClumpBodies
 from pdemfem.contact.tables import build_contact_tables
 from pdemfem.coupling.check import blended_transfer, coupling_assessment
 from pdemfem.coupling.driver import CouplingDriver
@@ -148,6 +149,14 @@ class Simulation:
             wall_count=len(plane_walls),
             history_width=tables.history_width,
         )
+        clumps = None
+        if inserted.clumps is not None:
+            member_mass = np.zeros(total)
+            for index, template in inserted.clumps.templates.items():
+                rows = np.flatnonzero((inserted.group_index == index))
+                member_mass[rows] = np.tile(template.member_mass, len(rows) // len(template.member_mass))
+            ClumpBodies.attach(state, inserted.member_body[mine], inserted.member_offsets[mine], member_mass[mine])
+            clumps = ClumpBodies.from_insertion(inserted.clumps)
         count = total
         walls = PlaneWalls(plane_walls, tables.material_names)
         # Mesh and cylinder walls, and the solids' contact surfaces, plug into the particle system as contributors.
@@ -170,7 +179,8 @@ class Simulation:
                               domain_box=scene.domain.box, periodic_axes=scene.domain.periodic,
                               rebalance_threshold=scene.parallel.rebalance_threshold,
                               largest_radius=max(radius_bounds, default=0.0), outlets=self.outlets,
-                              heat_capacities=material_heat_capacities(scene, tables.material_names) if heat else None)
+                              heat_capacities=material_heat_capacities(scene, tables.material_names) if heat else None,
+                              clumps=clumps)
 
     def _build_solids(self) -> dict:
         """Deformable solids, each starting in static equilibrium under its constant loads."""
@@ -397,6 +407,22 @@ class Simulation:
             forces=state.forces[first:last].copy(),
             temperatures=None if state.temperatures is None else state.temperatures[first:last].copy(),
         )
+
+    @property
+    def clumps(self):
+        """The rigid clumps this rank owns (copies): ids, positions (centres of mass), orientations (unit quaternions
+        w, x, y, z turning the clump frame of the scene's spheres into the world), velocities,
+        angular_velocities (world frame), masses and principal_inertia (principal moments, ascending).
+        Empty arrays without clumps.  `particles` holds their member spheres."""
+        bodies = self.particle_system.clumps
+        if bodies is None:
+            return SimpleNamespace(ids=np.zeros(0, np.int64), positions=np.zeros((0, 3)), orientations=np.zeros((0, 4)),
+                                   velocities=np.zeros((0, 3)), angular_velocities=np.zeros((0, 3)),
+                                   masses=np.zeros(0), principal_inertia=np.zeros((0, 3)))
+        return SimpleNamespace(ids=bodies.ids.copy(), positions=bodies.positions.copy(),
+                               orientations=bodies.clump_frame_orientations(), velocities=bodies.velocities.copy(),
+                               angular_velocities=bodies.angular_velocities.copy(), masses=bodies.masses.copy(),
+                               principal_inertia=bodies.principal_moments.copy())
 
     def particle_count(self) -> int:
         """Total number of particles over all ranks."""

@@ -64,3 +64,21 @@ def quaternion_from_axis_angle(axis, angle):
     axis = np.asarray(axis, dtype=np.float64)
     axis = axis / np.linalg.norm(axis)
     return np.concatenate([[math.cos(0.5 * angle)], math.sin(0.5 * angle) * axis])
+
+
+def quaternion_products(a, b):
+    """Row-wise products a (x) b of (n, 4) (or (4,)) unit quaternions: the rotation b, then a."""
+    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
+    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
+    w1, x1, y1, z1 = a.T
+    w2, x2, y2, z2 = b.T
+    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+                     w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=1)
+
+
+def quaternion_conjugates(q):
+    """The inverse rotations of (n, 4) unit quaternions."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    return q * np.array([1.0, -1.0, -1.0, -1.0])

@@ -57,6 +57,10 @@ PARTICLE_SOURCES = {"positions": "positions", "velocities": "velocities", "radii
                     "torques": "torques", "materials": "material_index"}
 
 
+# The clumps' series (clumps.h5/.xdmf), written with the particles' when the scene has clumps.
+CLUMP_FIELDS = ("positions", "orientations", "velocities", "angular_velocities", "ids")
+
+
 def checkpoint_directory(simulation) -> Path:
     return checkpoint_directory_of(simulation.scene, simulation.base_dir, simulation.output_dir)
 
@@ -81,6 +85,7 @@ class SimulationIO:
         self.last_checkpoint = None      # (step, path) of the newest checkpoint written by this run
         self._history = None
         self._particles_out = None
+        self._clumps_out = None
         self._solid_outputs = {}
         self._solid_layouts = {}
         self._last_output_step = None
@@ -106,6 +111,9 @@ class SimulationIO:
         if self.particle_fields():
             self._particles_out = ParticleOutput(sim.output_dir, comm, self.particle_fields(),
                                                  resume_step=self.resume_step)
+            if sim.particle_system.clumps is not None:  # the bodies, beside their member spheres
+                self._clumps_out = ParticleOutput(sim.output_dir, comm, CLUMP_FIELDS, name="clumps",
+                                                  resume_step=self.resume_step)
         if output.solids:
             for name, solid in sim.solids.items():
                 layout = self._solid_layouts[name] = _SolidOutputLayout(solid, comm)
@@ -132,6 +140,7 @@ class SimulationIO:
             self._history.close()
             self._history = None
         self._particles_out = None
+        self._clumps_out = None
         self._solid_outputs = {}
 
     def write_output(self) -> None:
@@ -161,6 +170,8 @@ class SimulationIO:
         if self._particles_out is not None:
             yield "particles.h5", lambda: self._particles_out.write(sim.time, sim.step_count,
                                                                     self.particle_output_arrays())
+        if self._clumps_out is not None:
+            yield "clumps.h5", lambda: self._clumps_out.write(sim.time, sim.step_count, self.clump_output_arrays())
         for name, writer in self._solid_outputs.items():
             def write(name=name, writer=writer):
                 point_data, cell_data = self.solid_output_arrays(name)
@@ -180,6 +191,13 @@ class SimulationIO:
         state = self.sim.particle_system.state
         owned = state.owned_count
         return {name: getattr(state, PARTICLE_SOURCES[name])[:owned] for name in self.particle_fields()}
+
+    def clump_output_arrays(self) -> dict:
+        """The clumps' series (clumps.h5): centre of mass, orientation (w, x, y, z: clump frame -> world),
+        velocity, angular velocity and id of every body."""
+        clumps = self.sim.clumps
+        return {"positions": clumps.positions, "orientations": clumps.orientations, "velocities": clumps.velocities,
+                "angular_velocities": clumps.angular_velocities, "ids": clumps.ids}
 
     def solid_output_arrays(self, name: str) -> tuple[dict, dict]:
         """(point data, cell data) of a solid as written: this rank's blocks of the output

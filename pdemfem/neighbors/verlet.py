@@ -159,6 +159,11 @@ class VerletList:
             _fill_pairs(*arguments, self._partner_buffer)
         if not needed <= len(self._history_buffer) <= _LARGEST_BUFFER_SLACK * needed + 1024:
             self._history_buffer = np.empty((int(1.1 * needed) + 1024, len(self.history_signs)))
+        body = state.fields.get("clump_body")
+        if body is not None:  # members of one rigid clump never interact (pdemfem.clumps.bodies)
+            from pdemfem.clumps.bodies import drop_same_body_pairs
+
+            needed = drop_same_body_pairs(order, offsets, self._partner_buffer, body)
         self.row_particles = order
         self.offsets = offsets
         self.partners = self._partner_buffer[:needed]

@@ -3,6 +3,10 @@
 Groups are inserted in scene order and each new particle is checked against all
 earlier ones, so no insertion starts with overlaps.  Ids are 0..N-1 in that
 order.  Failures are SceneErrors naming the key and the fix.
+
+A clump group (pdemfem.clumps.insert) inserts its clumps' member spheres, each clump's
+members consecutively; `member_body` names each sphere's clump (-1: a single sphere) and
+`clumps` holds the bodies.  Members of one clump may overlap each other, nothing else.
 """
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from pdemfem.clumps.insert import place_clump_group
 from pdemfem.errors import SceneError
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
 
@@ -22,6 +27,21 @@ class InsertedParticles:
     positions: np.ndarray
     velocities: np.ndarray
     angular_velocities: np.ndarray
+    # Clumps: each sphere's body (index into `clumps`' arrays; -1 for a single sphere), its offset from
+    # the body's centre of mass (body principal frame), and the bodies (None without clump groups).
+    member_body: np.ndarray = None
+    member_offsets: np.ndarray = None
+    clumps: "InsertedClumps" = None
+
+
+@dataclass
+class InsertedClumps:
+    group_index: np.ndarray          # (B,) scene group of each body
+    positions: np.ndarray            # (B, 3) centres of mass
+    orientations: np.ndarray         # (B, 4) body principal frame -> world
+    velocities: np.ndarray
+    angular_velocities: np.ndarray   # (B, 3) world frame
+    templates: dict                  # group index -> pdemfem.clumps.template.ClumpTemplate
 
 
 # Overlaps smaller than this fraction of the smaller radius count as touching, not overlapping.
@@ -29,7 +49,7 @@ OVERLAP_TOLERANCE = 1e-9
 
 
 @njit(cache=True)
-def _first_overlap(positions, radii, cells, starts, dimensions, tolerance):
+def _first_overlap(positions, radii, labels, cells, starts, dimensions, tolerance):
     nx, ny, nz = dimensions[0], dimensions[1], dimensions[2]
     for i in range(positions.shape[0]):
         cell = cells[i]
@@ -44,8 +64,8 @@ def _first_overlap(positions, radii, cells, starts, dimensions, tolerance):
                         continue
                     neighbour = x + nx * (y + ny * z)
                     for j in range(starts[neighbour], starts[neighbour + 1]):
-                        if j <= i:
-                            continue
+                        if j <= i or (labels[i] >= 0 and labels[i] == labels[j]):
+                            continue  # members of one clump may overlap
                         distance = 0.0
                         for axis in range(3):
                             offset = positions[i, axis] - positions[j, axis]
@@ -56,17 +76,19 @@ def _first_overlap(positions, radii, cells, starts, dimensions, tolerance):
     return -1, -1
 
 
-def first_overlap(positions: np.ndarray, radii: np.ndarray):
-    """Indices (i, j) of some overlapping pair, or None."""
+def first_overlap(positions: np.ndarray, radii: np.ndarray, labels=None):
+    """Indices (i, j) of some overlapping pair, or None.  `labels`: clump of each sphere (-1: none);
+    members of one clump are not a pair."""
     if len(radii) < 2:
         return None
+    labels = np.full(len(radii), -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
     lower, size, dimensions = cell_grid(positions, 2.0 * float(radii.max()))
     cells = cell_indices(positions, lower, size, dimensions)
     order = np.argsort(cells, kind="stable")
     sorted_cells = np.ascontiguousarray(cells[order])
     starts = cell_starts(sorted_cells, int(np.prod(dimensions)))
     i, j = _first_overlap(np.ascontiguousarray(positions[order]), np.ascontiguousarray(radii[order]),
-                          sorted_cells, starts, dimensions, OVERLAP_TOLERANCE)
+                          np.ascontiguousarray(labels[order]), sorted_cells, starts, dimensions, OVERLAP_TOLERANCE)
     if i < 0:
         return None
     return int(order[i]), int(order[j])
@@ -151,10 +173,11 @@ def _largest_radius(group) -> float:
     return group.radius if isinstance(group.radius, float) else group.radius.max
 
 
-def _lattice_positions(group, where: str, rng):
+def _lattice_positions(group, where: str, rng, largest=None):
+    """Sites of a simple cubic lattice for particles of bounding radius `largest` (default: the group's)."""
     insert = group.insert
     low, high = (np.array(corner, dtype=float) for corner in insert.region.box)
-    largest = _largest_radius(group)
+    largest = _largest_radius(group) if largest is None else float(largest)
     spacing = insert.spacing or 2.0 * largest * 1.05
     if spacing < 2.0 * largest:
         raise SceneError(f"{where}.spacing", f"spacing {spacing} is smaller than the largest diameter {2 * largest}",
@@ -183,15 +206,34 @@ def _lattice_positions(group, where: str, rng):
 def insert_particles(scene) -> InsertedParticles:
     """Place every group's particles; raise SceneError when a group cannot be placed."""
     group_index, radii, positions, velocities, spins = [], [], [], [], []
+    member_body, member_offsets = [], []
+    bodies = {"group_index": [], "positions": [], "orientations": [], "velocities": [], "angular_velocities": []}
+    templates = {}
+    body_count = 0
     placed_positions = np.zeros((0, 3))
     placed_radii = np.zeros(0)
+    placed_labels = np.zeros(0, dtype=np.int64)
     for index, group in enumerate(scene.particles):
         where = f"particles[{index}].insert"
         insert = group.insert
         if insert.kind == "stream":  # inserted over time (pdemfem.particles.stream)
             continue
         rng = np.random.default_rng(insert.seed)
-        if insert.kind == "list":
+        group_labels = None
+        if group.clump is not None:
+            clumps = place_clump_group(scene, index, group, rng, placed_positions, placed_radii, _lattice_positions)
+            templates[index] = clumps.template
+            group_positions, group_radii = clumps.member_positions, clumps.member_radii
+            group_velocities, group_spins = clumps.member_velocities, clumps.member_angular_velocities
+            count = len(group_radii)
+            group_labels = clumps.member_body + body_count
+            member_body.append(group_labels)
+            member_offsets.append(clumps.member_offsets)
+            bodies["group_index"].append(np.full(len(clumps.positions), index, dtype=np.int32))
+            for key in ("positions", "orientations", "velocities", "angular_velocities"):
+                bodies[key].append(getattr(clumps, key))
+            body_count += len(clumps.positions)
+        elif insert.kind == "list":
             group_positions = np.array(insert.positions, dtype=float).reshape(-1, 3)
             count = len(group_positions)
             group_radii = (np.array(insert.radii, dtype=float) if insert.radii is not None
@@ -200,7 +242,7 @@ def insert_particles(scene) -> InsertedParticles:
                                 if insert.velocities is not None else np.tile(insert.velocity, (count, 1)))
             group_spins = (np.array(insert.angular_velocities, dtype=float).reshape(-1, 3)
                            if insert.angular_velocities is not None else np.zeros((count, 3)))
-        else:
+        if group.clump is None and insert.kind != "list":
             count = insert.count
             group_radii = _group_radii(group, count, rng)
             group_velocities = np.tile(np.array(insert.velocity, dtype=float), (count, 1))
@@ -209,14 +251,22 @@ def insert_particles(scene) -> InsertedParticles:
                 group_positions = _lattice_positions(group, where, rng)
             else:
                 group_positions = _random_positions(group, group_radii, placed_positions, placed_radii, where)
+        if group_labels is None:
+            group_labels = np.full(count, -1, dtype=np.int64)
+            member_body.append(group_labels)
+            member_offsets.append(np.zeros((count, 3)))
         combined_positions = np.concatenate([placed_positions, group_positions])
         combined_radii = np.concatenate([placed_radii, group_radii])
+        combined_labels = np.concatenate([placed_labels, group_labels])
         if insert.kind != "random":
-            overlap = first_overlap(combined_positions, combined_radii)
+            overlap = first_overlap(combined_positions, combined_radii, combined_labels)
             if overlap is not None:
                 raise SceneError(where, _describe_overlap(scene, overlap, combined_positions, combined_radii),
-                                 "move the positions apart (distance >= sum of radii) or shrink the radii")
-        placed_positions, placed_radii = combined_positions, combined_radii
+                                 "move the positions apart (distance >= sum of radii) or shrink the radii"
+                                 if group.clump is None else
+                                 "move the clumps apart (their spheres must not overlap another clump's), or turn "
+                                 "them (orientations)")
+        placed_positions, placed_radii, placed_labels = combined_positions, combined_radii, combined_labels
         group_index.append(np.full(count, index, dtype=np.int32))
         radii.append(group_radii)
         positions.append(group_positions)
@@ -224,9 +274,16 @@ def insert_particles(scene) -> InsertedParticles:
         spins.append(group_spins)
     if not radii:
         empty = np.zeros((0, 3))
-        return InsertedParticles(np.zeros(0, dtype=np.int32), np.zeros(0), empty, empty.copy(), empty.copy())
+        return InsertedParticles(np.zeros(0, dtype=np.int32), np.zeros(0), empty, empty.copy(), empty.copy(),
+                                 np.zeros(0, dtype=np.int64), empty.copy())
+    clumps = None
+    if body_count:
+        clumps = InsertedClumps(np.concatenate(bodies["group_index"]),
+                                *(np.concatenate(bodies[key]) for key in ("positions", "orientations", "velocities",
+                                                                          "angular_velocities")), templates)
     return InsertedParticles(np.concatenate(group_index), np.concatenate(radii), np.concatenate(positions),
-                             np.concatenate(velocities), np.concatenate(spins))
+                             np.concatenate(velocities), np.concatenate(spins), np.concatenate(member_body),
+                             np.concatenate(member_offsets), clumps)
 
 
 def _random_positions(group, radii, placed_positions, placed_radii, where):

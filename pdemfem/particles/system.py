@@ -23,6 +23,11 @@ so it is reordered and migrated with the particles.
 
 Particles come and go at list rebuilds: streams append new ones (add_particles), and the
 particles beyond the domain box or in an outlet (pdemfem.particles.outlet) are removed.
+
+Rigid clumps (pdemfem.clumps.bodies.ClumpBodies, `clumps`): their member spheres are rows of the
+state; the clumps integrate the free spheres and the bodies (members follow their bodies) and sum
+the members' loads onto the bodies after the contacts.  A clump leaving the domain box is removed whole.
+A body and its members belong to the rank owning its centre of mass; whole bodies migrate at rebuilds.
 """
 from __future__ import annotations
 
@@ -62,10 +67,12 @@ REORDER_FRACTION = 0.1
 class ParticleSystem(kinds.StateComponent):
     def __init__(self, state, walls, tables, gravity, dt: float, skin: float, comm, contributors=(),
                  domain_box=None, periodic_axes=(), rebalance_threshold: float = 1.2, largest_radius: float = 0.0,
-                 outlets=None, heat_capacities=None):
+                 outlets=None, heat_capacities=None, clumps=None):
         """heat_capacities: c [J/(kg K)] per contact-table row, needed when the tables' composition has
-        heat on (pdemfem.particles.heat); the state then carries temperatures."""
+        heat on (pdemfem.particles.heat); the state then carries temperatures.  clumps: the rigid
+        clumps (pdemfem.clumps.bodies.ClumpBodies) whose members are rows of `state`, or None."""
         self.state = state
+        self.clumps = clumps
         self.walls = walls
         self.tables = tables
         self.gravity = np.asarray(gravity, dtype=float)
@@ -115,6 +122,11 @@ class ParticleSystem(kinds.StateComponent):
         # A ghost is needed when it can touch (or, cohesive, still hold on to) an owned particle before the
         # next rebuild.
         self.ghost_cutoff = 2.0 * self.largest_radius + self.skin + tables.cohesion_reach
+        if clumps is not None:
+            # A member is owned by its body's rank and sticks out of that rank's box by up to its offset
+            # from the centre of mass; so may the partner it touches on the other side of a cut.
+            clumps.comm = comm
+            self.ghost_cutoff += 2.0 * clumps.protrusion(state, comm)
         self._check_periodic_lengths()
         self._rebuild(force_rebalance=True)
         self._compute_forces()
@@ -143,12 +155,15 @@ class ParticleSystem(kinds.StateComponent):
     def step(self) -> None:
         state, dt = self.state, self.dt
         owned = state.owned_count
-        largest_displacement_squared = kick_drift(owned, state.positions, state.velocities, state.angular_velocities,
-                                                  state.forces, state.torques, state.inverse_mass,
-                                                  state.inverse_inertia, self.gravity, 0.5 * dt, dt,
-                                                  state.positions_at_build)
-        # kick_drift zeroed the owned rows' loads; a rebuild (new rows, new order) clears this.
-        self._owned_loads_zeroed = True
+        if self.clumps is not None:
+            largest_displacement_squared = self.clumps.first_half(state, self.gravity, dt)
+        else:
+            largest_displacement_squared = kick_drift(owned, state.positions, state.velocities,
+                                                      state.angular_velocities, state.forces, state.torques,
+                                                      state.inverse_mass, state.inverse_inertia, self.gravity,
+                                                      0.5 * dt, dt, state.positions_at_build)
+            # kick_drift zeroed the owned rows' loads; a rebuild (new rows, new order) clears this.
+            self._owned_loads_zeroed = True
         if self.comm.size > 1:
             largest_displacement_squared = self.reductions.largest(self.comm, largest_displacement_squared)
         # Read by the run monitor's runaway stop (same value on every rank).
@@ -163,8 +178,11 @@ class ParticleSystem(kinds.StateComponent):
         elif self.ghosts is not None:
             self.ghosts.update(state)
         self._compute_forces()
-        kick(state.owned_count, state.velocities, state.angular_velocities, state.forces, state.torques,
-             state.inverse_mass, state.inverse_inertia, self.gravity, 0.5 * dt)
+        if self.clumps is not None:
+            self.clumps.second_half(state, self.gravity, dt)
+        else:
+            kick(state.owned_count, state.velocities, state.angular_velocities, state.forces, state.torques,
+                 state.inverse_mass, state.inverse_inertia, self.gravity, 0.5 * dt)
         if self.heat:
             ratio = update_temperatures(state.owned_count, state.temperatures, state.heat_flows, state.mass,
                                         state.material_index, self.heat_capacities, dt)
@@ -210,6 +228,8 @@ class ParticleSystem(kinds.StateComponent):
         result = {"state": state.state_dict(), "contacts": self.neighbors.state_dict(state.ids, state.owned_count)}
         if self.decomposition is not None:
             result["decomposition"] = self.decomposition.state_dict()
+        if self.clumps is not None:
+            result["clumps"] = self.clumps.state_dict()
         result["totals"] = {"dissipated_energy": kinds.scalar(float(self.dissipated_energy)),
                             "elastic_energy": kinds.scalar(float(self.elastic_energy)),
                             "contact_count": kinds.scalar(int(self.contact_count)),
@@ -226,6 +246,10 @@ class ParticleSystem(kinds.StateComponent):
         contacts; the stored decomposition when it was written on as many ranks as run now (else the
         next rebuild re-partitions).  canonicalize() then rebuilds from exactly this."""
         self.state.load_state_dict(stored["state"])
+        if self.clumps is not None:
+            if "clumps" not in stored:
+                raise kinds.StateMismatch("holds no clumps (written by a scene without clumps)")
+            self.clumps.load_state_dict(stored["clumps"])
         self.neighbors = VerletList(self.neighbors.history_signs, self.neighbors.cohesion_reach)
         self.neighbors.load_state_dict(stored["contacts"], self.comm, self.state.ids)
         decomposition = stored.get("decomposition")
@@ -294,7 +318,11 @@ class ParticleSystem(kinds.StateComponent):
                 self._pending_rebalance_log = before
             if self.comm.size > 1:
                 destinations = self.decomposition.owners(state.positions)
+                if self.clumps is not None:  # members go with their bodies, whole bodies move
+                    destinations = self.clumps.member_destinations(state, destinations, self.decomposition)
                 records = migrate(self.comm, state, destinations, records)
+                if self.clumps is not None:
+                    self.clumps.migrate_bodies(self.comm, self.decomposition)
         if canonical and state.owned_count:
             state.reorder(np.argsort(state.ids, kind="stable"))  # the cell sort is stable: ties by id
         self._sort_owned()
@@ -304,6 +332,8 @@ class ParticleSystem(kinds.StateComponent):
         self.walls.build_candidates(state.positions[:state.owned_count], state.radii[:state.owned_count],
                                     self.skin + self.tables.cohesion_reach)
         state.positions_at_build = state.positions.copy()
+        if self.clumps is not None:
+            self.clumps.refresh_rows(state)
         if getattr(self, "_pending_rebalance_log", None) is not None and self.comm.size > 1:
             after = self._imbalance(np.ones(state.owned_count) + self._rows_per_particle())
             if self.comm.rank == 0:
@@ -358,6 +388,8 @@ class ParticleSystem(kinds.StateComponent):
         bounded = np.isfinite(self.domain_lower) & (self.periodic_lengths == 0)
         outside, nonfinite = outside_domain(state.owned_count, state.positions, self.domain_lower,
                                             self.domain_upper, bounded)
+        if self.clumps is not None:  # a clump goes whole (counted as its member spheres)
+            outside = self.clumps.remove_leaving(state, outside)
         counts = np.array([np.count_nonzero(outside), nonfinite])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
@@ -420,6 +452,8 @@ class ParticleSystem(kinds.StateComponent):
             elastic += extra_elastic
             dissipated += extra_dissipated
             contacts += extra_contacts
+        if self.clumps is not None:
+            self.clumps.sum_loads(state)
         if self.comm.size > 1:
             scalars = self.reductions.sum_totals(self.comm, (elastic, dissipated, contacts), walls.forces,
                                                  self.contributors)
@@ -439,9 +473,12 @@ class ParticleSystem(kinds.StateComponent):
         """Energies summed over the ranks.  The same pass leaves the largest particle speed over the
         ranks in `fastest_speed` (inf when a velocity is not finite), for the run monitor."""
         state = self.state
-        kinetic, rotational, potential, fastest_squared = particle_energy_sums(
-            state.owned_count, state.mass, state.velocities, state.angular_velocities, state.inverse_inertia,
-            state.positions, self.gravity)
+        if self.clumps is not None:  # members count with their bodies (translation and rotation)
+            kinetic, rotational, potential, fastest_squared = self.clumps.energy_sums(state, self.gravity)
+        else:
+            kinetic, rotational, potential, fastest_squared = particle_energy_sums(
+                state.owned_count, state.mass, state.velocities, state.angular_velocities, state.inverse_inertia,
+                state.positions, self.gravity)
         thermal = (heat_content(state.owned_count, state.temperatures, state.mass, state.material_index,
                                 self.heat_capacities) if self.heat else 0.0)
         local = np.array([kinetic, rotational, potential, thermal])

@@ -77,7 +77,12 @@ TUNNEL_TRAVEL = 0.5
 
 
 def group_radius_range(group: ParticleGroupConfig) -> Tuple[float, float]:
-    """(smallest, largest) radius a group can have."""
+    """(smallest, largest) radius a group can have (a clump group: of its member spheres)."""
+    if group.clump is not None:
+        from pdemfem.clumps.template import clump_spheres
+
+        radii = clump_spheres(group.clump)[1]
+        return float(radii.min()), float(radii.max())
     if group.insert.kind == "list" and group.insert.radii:
         return float(min(group.insert.radii)), float(max(group.insert.radii))
     if isinstance(group.radius, RadiusRange):
@@ -106,6 +111,32 @@ def _shear_modulus(material: MaterialConfig) -> float:
 
 def _mass(material: MaterialConfig, radius: float) -> float:
     return 4.0 / 3.0 * math.pi * radius**3 * material.density
+
+
+def group_reach(group: ParticleGroupConfig) -> float:
+    """How far a group's particles reach from their insertion point: the largest radius, or a clump's
+    bounding radius about its centre of mass."""
+    if group.clump is not None:
+        return clump_group_template(group, None).extent
+    return group_radius_range(group)[1]
+
+
+def clump_group_template(group: ParticleGroupConfig, material: Optional[MaterialConfig]):
+    """The ClumpTemplate of a clump group (pdemfem.clumps.template); material None: a unit density (the
+    geometry only)."""
+    from pdemfem.clumps.template import clump_template
+
+    return clump_template(group.clump, material.density if material is not None else 1.0)
+
+
+def smallest_contact_mass(group: ParticleGroupConfig, material: MaterialConfig) -> float:
+    """The lightest mass a contact on one of the group's particles acts on: the smallest sphere's mass;
+    for clumps the smaller of the smallest member's mass share and the smallest effective mass at a
+    member (pdemfem.clumps.template), so dt resolves a contact on the body as it moves."""
+    if group.clump is not None:
+        template = clump_group_template(group, material)
+        return min(float(template.member_mass.min()), template.smallest_effective_mass)
+    return _mass(material, group_radius_range(group)[0])
 
 
 def _effective_modulus(a: MaterialConfig, b: Optional[MaterialConfig]) -> float:
@@ -307,6 +338,14 @@ def _group_bottoms(group: ParticleGroupConfig, up) -> List[Tuple[float, float, f
     from above (top corners) and are exact at the bottom.
     """
     insert = group.insert
+    if group.clump is not None:  # a clump's lowest point lies within its bounding radius of its centre
+        reach = group_reach(group)
+        if insert.kind == "list":
+            return [tuple(c - reach * u for c, u in zip(p, up)) for p in insert.positions or ()]
+        (x0, y0, z0), (x1, y1, z1) = insert.region.box
+        corners = [(x, y, z) for x in (x0 + reach, x1 - reach) for y in (y0 + reach, y1 - reach)
+                   for z in (z0 + reach, z1 - reach)]
+        return [tuple(c - reach * u for c, u in zip(corner, up)) for corner in corners]
     if insert.kind == "list":
         smallest, _ = group_radius_range(group)
         radii = insert.radii or [group.radius if not isinstance(group.radius, RadiusRange) else smallest] * len(
@@ -508,7 +547,7 @@ def _pairs(scene: Scene, with_shear: bool = False):
     for group, count in zip(scene.particles, group_counts(scene)):
         material = scene.materials[group.material]
         radius, _ = group_radius_range(group)
-        smallest.append((group.material, material, radius, _mass(material, radius), count))
+        smallest.append((group.material, material, radius, smallest_contact_mass(group, material), count))
     for i, (name_a, a, r_a, m_a, count_a) in enumerate(smallest):
         for j, (name_b, b, r_b, m_b, count_b) in enumerate(smallest[i:], start=i):
             if count_a == 0 or count_b == 0 or (i == j and count_a < 2):
@@ -604,9 +643,12 @@ def memory_estimate_bytes(scene: Scene) -> int:
     list of ~8 entries per particle (int32 partner index, int64 partner id, three
     float64 tangential-history components), its CSR offsets, and 40 % for ghosts,
     the history remap at list rebuild and sort scratch.  Excludes the fixed cost of
-    the interpreter, numba and PETSc (~150-250 MB per rank) and any FEM mesh.
+    the interpreter, numba and PETSc (~150-250 MB per rank) and any FEM mesh.  N counts spheres: a
+    clump's member spheres each (their bodies' arrays are small beside them).
     """
-    return particle_count(scene) * BYTES_PER_PARTICLE
+    spheres = sum(count * (len(clump_group_template(group, None).member_radii) if group.clump is not None else 1)
+                  for group, count in zip(scene.particles, group_counts(scene)))
+    return spheres * BYTES_PER_PARTICLE
 
 
 # --------------------------------------------------------------------------- warnings
@@ -763,7 +805,7 @@ def start_inside_walls(scene: Scene) -> List[str]:
     out with the energy of the whole overlap)."""
     found = []
     for index, group in enumerate(scene.particles):
-        _, largest = group_radius_range(group)
+        largest = group_reach(group)
         for wall in _plane_walls(scene):
             if _points_behind_wall(group, wall, largest):
                 found.append(

@@ -38,7 +38,9 @@ def interaction_cutoff(scene, radii: np.ndarray) -> float:
 
 
 def _smallest_radius(scene) -> float | None:
-    radii = [group.radius if isinstance(group.radius, float) else group.radius.min for group in scene.particles]
+    from pdemfem.scene.derived import group_radius_range
+
+    radii = [group_radius_range(group)[0] for group in scene.particles]
     radii += [radius for group in scene.particles for radius in (group.insert.radii or [])]
     return min(radii) if radii else None
 

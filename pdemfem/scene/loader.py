@@ -104,6 +104,9 @@ def load_scene(source: SceneSource, base_dir: Optional[Union[str, os.PathLike]] 
     ]
     if missing:
         raise _scene_error(label, missing, nodes)
+    for group in scene.particles:  # a clump's surface file is read when its shape is first needed
+        if group.clump is not None and group.clump.file is not None:
+            group.clump._resolved_file = str(resolve_path(folder, group.clump.file))
     return scene, folder
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import difflib
 from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, PrivateAttr, field_validator, model_validator
 
 from pdemfem.config_types import Box, NonNegativeFloat, PositiveFloat, StrictModel, Vector3  # noqa: F401 (re-exported)
 from pdemfem.contact.registry import NORMAL_BY_NAME, ROLLING_BY_NAME
@@ -118,6 +118,12 @@ class InsertConfig(StrictModel):
         None, description="list: one initial angular velocity per position [rad/s]; default zero")
     radii: Optional[List[PositiveFloat]] = Field(
         None, description="list: one radius per position [m], overriding the group's radius")
+    orientations: Optional[List[Tuple[float, float, float, float]]] = Field(
+        None, description="list, clump groups: one orientation per position, a unit quaternion [w, x, y, z] turning "
+                          "the clump's frame into the world's; default: each clump as given in its frame")
+    orientation: Optional[Tuple[float, float, float, float]] = Field(
+        None, description="lattice, random, clump groups: the orientation [w, x, y, z] of every clump; default: "
+                          "uniformly random orientations drawn from seed")
     # kind: lattice / random
     velocity: Vector3 = Field((0.0, 0.0, 0.0), description="initial velocity of every particle [m/s]")
     spacing: Optional[PositiveFloat] = Field(
@@ -151,17 +157,23 @@ class InsertConfig(StrictModel):
                                  + ("; remove one" if self.rate is not None else "; add one, e.g. rate: 1000"))
             if self.stop is not None and self.stop <= self.start:
                 raise ValueError(f"stop ({self.stop:g} s) is not after start ({self.start:g} s); make stop > start")
-            for key in ("positions", "velocities", "angular_velocities", "radii", "spacing", "jitter"):
+            for key in ("positions", "velocities", "angular_velocities", "radii", "spacing", "jitter", "orientations",
+                        "orientation"):
                 if key in self.model_fields_set:
                     raise ValueError(f"kind stream does not use {key}; remove it")
         elif self.kind == "list":
             if not self.positions:
                 raise ValueError("kind list needs positions: [[x,y,z], ...]")
-            for key in ("velocities", "angular_velocities", "radii"):
+            for key in ("velocities", "angular_velocities", "radii", "orientations"):
                 values = getattr(self, key)
                 if values is not None and len(values) != len(self.positions):
                     raise ValueError(f"{key} has {len(values)} entries but positions has {len(self.positions)}")
+            if self.orientation is not None:
+                raise ValueError("kind list takes orientations: (one per position), not orientation")
         else:
+            if self.orientations is not None:
+                raise ValueError(f"kind {self.kind} takes orientation: [w, x, y, z] (one for every clump), not "
+                                 f"orientations")
             if self.region is None:
                 raise ValueError(f"kind {self.kind} needs region: {{box: [[x0,y0,z0],[x1,y1,z1]]}}")
             if self.count is None:
@@ -169,15 +181,74 @@ class InsertConfig(StrictModel):
         return self
 
 
+class ClumpSphere(StrictModel):
+    position: Vector3 = Field(description="the sphere's centre in the clump's own frame [m]")
+    radius: PositiveFloat = Field(description="the sphere's radius [m]")
+
+
+class ClumpConfig(StrictModel):
+    spheres: Union[List[ClumpSphere], Annotated[int, Field(gt=0)]] = Field(
+        description="the member spheres [{position: [x, y, z], radius: r}, ...] in the clump's frame [m]; with file: "
+                    "how many spheres fill the surface (docs/shapes.md)")
+    file: Optional[str] = Field(
+        None, description="a closed surface (STL, .msh) the clump fills with `spheres` spheres, in its frame")
+    scale: PositiveFloat = Field(
+        1.0, description="file: factor applied to the surface's coordinates (e.g. 1e-3 for mm)")
+    mass: Optional[PositiveFloat] = Field(
+        None, description="the clump's mass [kg]; default: the union of its spheres at the material's density "
+                          "(a given mass scales the inertia with it)")
+    inertia: Optional[Union[Vector3, Tuple[Vector3, Vector3, Vector3]]] = Field(
+        None, description="principal moments [I1, I2, I3] or a 3 x 3 tensor about the centre of mass in the clump "
+                          "frame [kg m^2]; default: that of the union of its spheres")
+    # The file resolved against the scene file's folder (set by pdemfem.scene.loader.load_scene).
+    _resolved_file: Optional[str] = PrivateAttr(None)
+
+    @model_validator(mode="after")
+    def _one_source(self):
+        if self.file is not None and not isinstance(self.spheres, int):
+            raise ValueError("with file, spheres is the number of spheres that fill the surface (e.g. spheres: 8), "
+                             "not a list")
+        if self.file is None and isinstance(self.spheres, int):
+            raise ValueError("spheres: a number needs file: (the surface to fill); without a file give the spheres "
+                             "as [{position: [x, y, z], radius: r}, ...]")
+        if self.file is None and not self.spheres:
+            raise ValueError("spheres is empty: give at least one {position: [x, y, z], radius: r}")
+        if self.file is None and "scale" in self.model_fields_set:
+            raise ValueError("scale applies to file only; give the spheres in metres or use file:")
+        return self
+
+
 class ParticleGroupConfig(StrictModel):
     name: str = Field(description="unique group name")
     material: str = Field(description="a name under materials")
-    radius: Union[PositiveFloat, RadiusRange] = Field(
-        description="one radius [m], or {min, max} for radii uniformly distributed between the two")
+    radius: Optional[Union[PositiveFloat, RadiusRange]] = Field(
+        None, description="one radius [m], or {min, max} for radii uniformly distributed between the two (spheres; "
+                          "a clump group gives clump instead)")
+    clump: Optional[ClumpConfig] = Field(
+        None, description="the group's particles are rigid clumps of these spheres instead of single spheres "
+                          "(docs/shapes.md); insertion positions are the clumps' centres of mass")
     insert: InsertConfig = Field(description="how the particles are placed at the start (or, kind stream, over time)")
     initial_temperature: Optional[PositiveFloat] = Field(
         None, description="starting temperature [K]; giving it switches heat on (docs/heat.md); with heat on "
                           "and no value: heat.default_temperature")
+
+    @model_validator(mode="after")
+    def _sphere_or_clump(self):
+        if self.clump is None:
+            if self.radius is None:
+                raise ValueError("a particle group needs radius: [m] (spheres) or clump: {spheres: [...]} (clumps)")
+            for key in ("orientations", "orientation"):
+                if getattr(self.insert, key) is not None:
+                    raise ValueError(f"insert.{key} is for clump groups (spheres have no orientation); remove it")
+            return self
+        if self.radius is not None:
+            raise ValueError("a clump group takes its sizes from clump.spheres: remove radius")
+        if self.insert.kind == "stream":
+            raise ValueError("clump groups cannot be inserted by a stream yet; use kind list, lattice or random")
+        if self.insert.radii is not None:
+            raise ValueError("insert.radii does not apply to clumps (their spheres are given in clump.spheres); "
+                             "remove it")
+        return self
 
 
 class CylinderAxis(StrictModel):
@@ -434,6 +505,13 @@ class Scene(StrictModel):
         elif "temperature" in self.output.particles and "particles" in self.output.model_fields_set:
             raise ValueError("output.particles: temperature is written only with heat on; give a particle group "
                              "initial_temperature (or heat: {enabled: true}), or remove temperature from the list")
+        clump_groups = [index for index, group in enumerate(self.particles) if group.clump is not None]
+        if clump_groups and self.outlets:
+            raise ValueError(f"particles[{clump_groups[0]}].clump: outlets cannot take clumps yet (an outlet removes "
+                             f"single spheres); remove outlets or use spheres")
+        if clump_groups and self.domain.periodic:
+            raise ValueError(f"particles[{clump_groups[0]}].clump: clumps in a periodic domain are not supported yet; "
+                             f"remove domain.periodic or use spheres")
         for kind, items in (("particles", self.particles), ("walls", self.walls), ("outlets", self.outlets)):
             names = [item.name for item in items]
             duplicates = sorted({name for name in names if names.count(name) > 1})

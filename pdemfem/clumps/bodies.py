@@ -1,0 +1,388 @@
+"""The clumps of a particle system: body arrays, their step, their loads, energies and checkpoint.
+
+The member spheres of every clump are ordinary rows of the ParticleState (the contact code sees
+spheres).  Two per-particle fields tie them to their body:
+
+    clump_body    int64, the body's global id (-1: a single sphere); sent to ghosts (the neighbour
+                  list leaves out the pairs of one body, pdemfem.neighbors.verlet)
+    clump_offset  (3,) the member's centre relative to the body's centre of mass, body principal frame
+
+A member's row carries its mass share (pdemfem.clumps.template) as its mass and 2/5 share r^2 as
+its inertia, which the contact laws read; the sphere integrator skips members.  One step
+(ParticleSystem.step with clumps):
+
+    first_half    free spheres: half kick, drift; bodies: kick_bodies(dt/2), drift_bodies(dt),
+                  omega from L; member rows <- member_states (position, velocity, spin)
+    (list rebuild or ghost update; every contact force on the rows)
+    sum_loads     body F, T <- sum_member_loads of the owned members (after the contacts)
+    second_half   free spheres: half kick; bodies: kick_bodies(dt/2), omega; member velocities
+
+The kick formulas are those of pdemfem.particles.integrate, so a clump of one sphere follows the
+sphere's translation bit for bit (its rotation goes through L = I omega: equal to round-off).
+
+Ranks: a body belongs to the rank whose box holds its centre of mass, and so do all its members
+(owned rows there, wherever they stick out); at a list rebuild the members migrate to their body's
+owner (`member_destinations`) and the bodies follow (`migrate_bodies`).  Members reach the other
+ranks as ghosts by position like any particle; the ghost cutoff is widened by twice the largest
+member offset (a member sticks out of its owner's box by at most that, and so may its partner).
+After the insertion and after a checkpoint is read every rank holds every body (`replicated`);
+the next rebuild keeps each rank's own.  Body arrays are kept in id order.
+"""
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+from numba import njit
+
+from pdemfem import state_dict as kinds
+from pdemfem.clumps.quaternion import quaternion_conjugates, quaternion_products
+from pdemfem.clumps.rigid_body import (angular_momenta_from_velocities, angular_velocities_from_momenta,
+                                       drift_bodies, kick_bodies, member_states, rotational_energies,
+                                       sum_member_loads)
+
+BODY_FIELD = "clump_body"
+OFFSET_FIELD = "clump_offset"
+
+
+@njit(cache=True)
+def kick_free_spheres(owned_count, body, velocities, angular_velocities, forces, torques, inverse_mass,
+                      inverse_inertia, gravity, half_dt):
+    """pdemfem.particles.integrate.kick over the rows that are not clump members."""
+    for i in range(owned_count):
+        if body[i] >= 0:
+            continue
+        for axis in range(3):
+            velocities[i, axis] += half_dt * (forces[i, axis] * inverse_mass[i] + gravity[axis])
+            angular_velocities[i, axis] += half_dt * torques[i, axis] * inverse_inertia[i]
+
+
+@njit(cache=True)
+def drift_free_spheres(owned_count, body, positions, velocities, dt, positions_at_build):
+    """pdemfem.particles.integrate.drift over the rows that are not clump members (inf on a non-finite one)."""
+    largest = 0.0
+    for i in range(owned_count):
+        if body[i] >= 0:
+            continue
+        displacement_squared = 0.0
+        for axis in range(3):
+            positions[i, axis] += dt * velocities[i, axis]
+            offset = positions[i, axis] - positions_at_build[i, axis]
+            displacement_squared += offset * offset
+        if not displacement_squared < np.inf:
+            largest = np.inf
+        elif displacement_squared > largest:
+            largest = displacement_squared
+    return largest
+
+
+@njit(cache=True)
+def scatter_members(rows, member_positions, member_velocities, member_spins, positions, velocities,
+                    angular_velocities, positions_at_build):
+    """Write the members' state into their rows; returns the largest squared displacement since the
+    list build (inf when one is not finite)."""
+    largest = 0.0
+    for k in range(rows.shape[0]):
+        i = rows[k]
+        displacement_squared = 0.0
+        for axis in range(3):
+            positions[i, axis] = member_positions[k, axis]
+            velocities[i, axis] = member_velocities[k, axis]
+            angular_velocities[i, axis] = member_spins[k, axis]
+            offset = positions[i, axis] - positions_at_build[i, axis]
+            displacement_squared += offset * offset
+        if not displacement_squared < np.inf:
+            largest = np.inf
+        elif displacement_squared > largest:
+            largest = displacement_squared
+    return largest
+
+
+@njit(cache=True)
+def gather_member_loads(rows, forces, torques, member_forces, member_torques):
+    for k in range(rows.shape[0]):
+        for axis in range(3):
+            member_forces[k, axis] = forces[rows[k], axis]
+            member_torques[k, axis] = torques[rows[k], axis]
+
+
+@njit(cache=True)
+def free_sphere_energy_sums(owned_count, body, mass, velocities, angular_velocities, inverse_inertia, positions,
+                            gravity):
+    """pdemfem.particles.energy.particle_energy_sums over the single spheres (members are counted with
+    their bodies); the largest squared speed is over every row, members included."""
+    kinetic = 0.0
+    rotational = 0.0
+    potential = 0.0
+    fastest = 0.0
+    for i in range(owned_count):
+        speed_squared = 0.0
+        spin_squared = 0.0
+        height = 0.0
+        for axis in range(3):
+            speed_squared += velocities[i, axis] * velocities[i, axis]
+            spin_squared += angular_velocities[i, axis] * angular_velocities[i, axis]
+            height += positions[i, axis] * gravity[axis]
+        if body[i] < 0:
+            kinetic += mass[i] * speed_squared
+            rotational += spin_squared / inverse_inertia[i]
+            potential -= mass[i] * height
+        if speed_squared > fastest:
+            fastest = speed_squared
+        elif speed_squared != speed_squared:  # NaN
+            fastest = np.inf
+    return 0.5 * kinetic, 0.5 * rotational, potential, fastest
+
+
+class ClumpBodies(kinds.StateComponent):
+    """The rigid bodies (arrays over bodies, world frame; see the module docstring)."""
+
+    def __init__(self, ids, group_index, positions, orientations, velocities, angular_velocities, masses,
+                 principal_moments, principal_orientations):
+        self.ids = np.ascontiguousarray(ids, dtype=np.int64)
+        self.group_index = np.ascontiguousarray(group_index, dtype=np.int32)
+        self.positions = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 3)
+        self.orientations = np.ascontiguousarray(orientations, dtype=np.float64).reshape(-1, 4)
+        self.velocities = np.ascontiguousarray(velocities, dtype=np.float64).reshape(-1, 3)
+        self.masses = np.ascontiguousarray(masses, dtype=np.float64)
+        self.principal_moments = np.ascontiguousarray(principal_moments, dtype=np.float64).reshape(-1, 3)
+        # Body principal frame -> the clump frame the scene gave (reported orientations are the clump frame's).
+        self.principal_orientations = np.ascontiguousarray(principal_orientations, dtype=np.float64).reshape(-1, 4)
+        self.angular_momenta = np.zeros((self.count, 3))
+        angular_momenta_from_velocities(self.count, self.orientations,
+                                        np.ascontiguousarray(angular_velocities, dtype=np.float64).reshape(-1, 3),
+                                        self.principal_moments, self.angular_momenta)
+        self.forces = np.zeros((self.count, 3))
+        self.torques = np.zeros((self.count, 3))
+        self.lost = 0  # bodies removed on this rank (a member left domain.box)
+        # Every rank holds every body (after the insertion or a checkpoint read) until the next rebuild.
+        self.replicated = True
+        self.comm = None  # set by the particle system
+        self._derive()
+        self.member_rows = np.zeros(0, dtype=np.int64)
+
+    @classmethod
+    def from_insertion(cls, inserted):
+        """Bodies of pdemfem.particles.insert.InsertedClumps (ids 0..B-1 in insertion order)."""
+        templates = [inserted.templates[int(group)] for group in inserted.group_index]
+        return cls(np.arange(len(inserted.group_index)), inserted.group_index, inserted.positions,
+                   inserted.orientations, inserted.velocities, inserted.angular_velocities,
+                   [t.mass for t in templates], [t.principal_moments for t in templates],
+                   [t.principal_orientation for t in templates])
+
+    def _derive(self):
+        self.inverse_masses = 1.0 / self.masses
+        self.angular_velocities = np.zeros((self.count, 3))
+        angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
+                                        self.angular_velocities)
+
+    @property
+    def count(self) -> int:
+        return len(self.ids)
+
+    # ------------------------------------------------------------------ members
+    @staticmethod
+    def attach(state, member_body, member_offsets, member_mass) -> None:
+        """Register the member fields on `state` (rows as inserted; member_body: body ids, -1 for a
+        single sphere) and give members their mass shares."""
+        body = state.add_field(BODY_FIELD, (), np.int64, fill=-1, ghost_rebuild=True)
+        body[:] = member_body
+        state.add_field(OFFSET_FIELD, (3,))[:] = member_offsets
+        members = body >= 0
+        state.mass[members] = member_mass[members]
+        state.inverse_mass[members] = 1.0 / state.mass[members]
+        state.inverse_inertia[members] = 1.0 / (0.4 * state.mass[members] * state.radii[members] ** 2)
+
+    def local_index(self, body_ids) -> np.ndarray:
+        """Index in these (id-sorted) arrays of bodies by id; every id must be held here."""
+        index = np.searchsorted(self.ids, body_ids)
+        if len(body_ids) and (index.max() >= self.count or np.any(self.ids[index] != body_ids)):
+            raise RuntimeError("a clump member's body is not on its rank")
+        return index.astype(np.int64)
+
+    @staticmethod
+    def protrusion(state, comm) -> float:
+        """Largest distance of a member centre from its body's centre of mass (over the ranks)."""
+        offsets = state.fields[OFFSET_FIELD][:state.owned_count]
+        local = float(np.sqrt((offsets ** 2).sum(axis=1).max())) if len(offsets) else 0.0
+        return comm.allreduce(local, op=MPI.MAX) if comm.size > 1 else local
+
+    def member_destinations(self, state, destinations, decomposition) -> np.ndarray:
+        """Rank of every owned row at a rebuild: a member goes to its body's owner."""
+        body = state.fields[BODY_FIELD][:state.owned_count]
+        members = np.flatnonzero(body >= 0)
+        if len(members):
+            destinations = destinations.copy()
+            centres = self.positions[self.local_index(body[members])]
+            destinations[members] = decomposition.owners(centres)
+        return destinations
+
+    _ARRAYS = ("ids", "group_index", "positions", "orientations", "velocities", "masses", "principal_moments",
+               "principal_orientations", "angular_momenta", "forces", "torques")
+
+    def _keep(self, rows) -> None:
+        for name in self._ARRAYS:
+            setattr(self, name, np.ascontiguousarray(getattr(self, name)[rows]))
+
+    def _sort(self) -> None:
+        self._keep(np.argsort(self.ids, kind="stable"))
+        self._derive()
+
+    def migrate_bodies(self, comm, decomposition) -> None:
+        """Collective, at a rebuild after the members moved: every body to the rank owning its centre."""
+        owners = decomposition.owners(self.positions) if self.count else np.zeros(0, dtype=np.int64)
+        if self.replicated:  # every rank holds them all: keep one's own
+            self._keep(np.flatnonzero(owners == comm.rank))
+            self.replicated = False
+            self._sort()
+            return
+        outgoing = [None] * comm.size
+        for rank in range(comm.size):
+            if rank != comm.rank:
+                rows = np.flatnonzero(owners == rank)
+                outgoing[rank] = {name: getattr(self, name)[rows] for name in self._ARRAYS} if len(rows) else None
+        incoming = comm.alltoall(outgoing)
+        self._keep(np.flatnonzero(owners == comm.rank))
+        for received in incoming:
+            if received is not None:
+                for name in self._ARRAYS:
+                    setattr(self, name, np.concatenate([getattr(self, name), received[name]]))
+        self._sort()
+
+    def refresh_rows(self, state) -> None:
+        """After a rebuild (rows sorted, removed, appended): the owned member rows and their body data."""
+        self.replicated = False
+        body = state.fields[BODY_FIELD][:state.owned_count]
+        self.member_rows = np.flatnonzero(body >= 0).astype(np.int64)
+        self.member_body = self.local_index(body[self.member_rows])
+        self.member_offsets = np.ascontiguousarray(state.fields[OFFSET_FIELD][self.member_rows])
+        count = len(self.member_rows)
+        self._member_positions = np.zeros((count, 3))
+        self._member_velocities = np.zeros((count, 3))
+        self._member_spins = np.zeros((count, 3))
+        self._member_forces = np.zeros((count, 3))
+        self._member_torques = np.zeros((count, 3))
+
+    def _place_members(self, state) -> float:
+        member_states(len(self.member_rows), self.member_body, self.member_offsets, self.positions, self.velocities,
+                      self.orientations, self.angular_velocities, self._member_positions, self._member_velocities,
+                      self._member_spins)
+        return scatter_members(self.member_rows, self._member_positions, self._member_velocities, self._member_spins,
+                               state.positions, state.velocities, state.angular_velocities, state.positions_at_build)
+
+    # ------------------------------------------------------------------ the step
+    def first_half(self, state, gravity, dt) -> float:
+        """Half kick and drift of the free spheres and the bodies; members follow their bodies.
+        Returns the largest squared displacement of a row since the list build."""
+        owned = state.owned_count
+        body = state.fields[BODY_FIELD]
+        kick_free_spheres(owned, body, state.velocities, state.angular_velocities, state.forces, state.torques,
+                          state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt)
+        kick_bodies(self.count, self.velocities, self.angular_momenta, self.forces, self.torques, self.inverse_masses,
+                    gravity, 0.5 * dt)
+        largest = drift_free_spheres(owned, body, state.positions, state.velocities, dt, state.positions_at_build)
+        drift_bodies(self.count, self.positions, self.velocities, self.orientations, self.angular_momenta,
+                     self.principal_moments, dt)
+        angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
+                                        self.angular_velocities)
+        return max(largest, self._place_members(state))
+
+    def sum_loads(self, state) -> None:
+        """Body force and torque about the centre of mass from the owned members' contact loads."""
+        gather_member_loads(self.member_rows, state.forces, state.torques, self._member_forces, self._member_torques)
+        self.forces[:] = 0.0
+        self.torques[:] = 0.0
+        sum_member_loads(len(self.member_rows), self.member_body, self.member_offsets, self.orientations,
+                         self._member_forces, self._member_torques, self.forces, self.torques)
+
+    def second_half(self, state, gravity, dt) -> None:
+        kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities, state.angular_velocities,
+                          state.forces, state.torques, state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt)
+        kick_bodies(self.count, self.velocities, self.angular_momenta, self.forces, self.torques, self.inverse_masses,
+                    gravity, 0.5 * dt)
+        angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
+                                        self.angular_velocities)
+        self._place_members(state)
+
+    # ------------------------------------------------------------------ energies
+    def energy_sums(self, state, gravity):
+        """(kinetic, rotational, potential, largest squared speed) of the free spheres and the bodies."""
+        kinetic, rotational, potential, fastest = free_sphere_energy_sums(
+            state.owned_count, state.fields[BODY_FIELD], state.mass, state.velocities, state.angular_velocities,
+            state.inverse_inertia, state.positions, gravity)
+        spins = np.zeros(self.count)
+        rotational_energies(self.count, self.orientations, self.angular_momenta, self.principal_moments, spins)
+        kinetic += 0.5 * float(np.sum(self.masses * np.einsum("ij,ij->i", self.velocities, self.velocities)))
+        rotational += float(spins.sum())
+        potential -= float(np.sum(self.masses * (self.positions @ gravity)))
+        return kinetic, rotational, potential, fastest
+
+    def clump_frame_orientations(self) -> np.ndarray:
+        """(B, 4) orientations clump frame -> world (the frame the scene's spheres are given in)."""
+        return quaternion_products(self.orientations, quaternion_conjugates(self.principal_orientations))
+
+    # ------------------------------------------------------------------ removal
+    def remove_leaving(self, state, outside: np.ndarray) -> np.ndarray:
+        """`outside` (owned rows leaving) grown to every member of a body one of whose members leaves;
+        those bodies are dropped and the remaining members' body indices renumbered."""
+        body = state.fields[BODY_FIELD][:state.owned_count]
+        leaving = np.unique(body[outside & (body >= 0)])
+        if not len(leaving):
+            return outside
+        outside = outside | np.isin(body, leaving)
+        gone = np.isin(self.ids, leaving)
+        self._keep(np.flatnonzero(~gone))
+        self.lost += int(gone.sum())
+        self._derive()
+        return outside
+
+    # ------------------------------------------------------------------ checkpoints
+    _STORED = ("ids", "group_index", "positions", "orientations", "velocities", "angular_momenta", "masses",
+               "principal_moments", "principal_orientations", "forces", "torques")
+
+    def state_dict(self) -> dict:
+        """Collective: the bodies' arrays as a table keyed by the rank of each id among all bodies
+        (the file does not depend on the rank count), and the count of lost bodies."""
+        comm = self.comm
+        if comm is not None and comm.size > 1:
+            every = np.sort(np.concatenate(comm.allgather(self.ids)))
+            lost = comm.allreduce(int(self.lost))
+        else:
+            every, lost = self.ids, int(self.lost)
+        keys = np.searchsorted(every, self.ids)
+        result = {name: kinds.keyed_slab(getattr(self, name), keys) for name in self._STORED}
+        result["lost"] = kinds.scalar(lost)
+        return result
+
+    def load_state_dict(self, stored: dict) -> None:
+        missing = [name for name in self._STORED if name not in stored]
+        if missing:
+            raise kinds.StateMismatch(f"lacks the clump state {missing} (written by a scene without clumps)")
+        for name in self._STORED:
+            current = getattr(self, name)
+            values = np.asarray(stored[name], dtype=current.dtype)
+            setattr(self, name, np.ascontiguousarray(values.reshape((-1, *current.shape[1:]))))
+        # The total is counted once, on rank 0.
+        self.lost = int(stored["lost"]) if self.comm is None or self.comm.rank == 0 else 0
+        self.replicated = True
+        self._sort()
+
+
+@njit(cache=True)
+def drop_same_body_pairs(row_particles, offsets, partners, body):
+    """Remove the listed pairs of two members of one clump from a CSR list, in place (order kept);
+    returns the new pair count (offsets are rewritten)."""
+    written = 0
+    start = offsets[0]
+    for row in range(row_particles.shape[0]):
+        end = offsets[row + 1]
+        own = body[row_particles[row]]
+        offsets[row] = written
+        for k in range(start, end):
+            j = partners[k]
+            if own >= 0 and body[j] == own:
+                continue
+            partners[written] = j
+            written += 1
+        start = end
+    offsets[row_particles.shape[0]] = written
+    return written
