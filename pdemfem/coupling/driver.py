@@ -89,7 +89,8 @@ class CouplingDriver(kinds.StateComponent):
         for name, solid in self.solids.items():
             self.fem_substeps[name] = solid.advance(interval)
         for solid in self._free_axes():
-            solid.frame.drift(interval)
+            if solid.frame.moving(solid.time - interval):
+                solid.frame.drift(interval)
         for surface in self.surfaces:
             surface.refresh_vertices(interval)
             if surface.conducting:
@@ -117,7 +118,8 @@ class CouplingDriver(kinds.StateComponent):
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, forces, op=MPI.SUM)
         for force, solid in zip(forces, free):
-            solid.frame.kick(float(force), float(solid.gravity[2]), interval)
+            if solid.frame.moving(solid.time):  # held before motion.start
+                solid.frame.kick(float(force), float(solid.gravity[2]), interval)
 
     def after_particle_step(self) -> None:
         """Collective: collect counter-forces, and every fem_every steps advance the solids."""

@@ -156,6 +156,9 @@ class MotionConfig(StrictModel):
     angular_velocity: Vector3 = Field(
         (0.0, 0.0, 0.0), description="rotation vector [rad/s]: the axis direction times the spin rate (right-handed)")
     velocity: Vector3 = Field((0.0, 0.0, 0.0), description="translation velocity of the axis [m/s]")
+    start: NonNegativeFloat = Field(
+        0.0, description="time [s] the motion begins: before it the solid rests at its mesh position (no spin, "
+                         "the axis held), e.g. while a bed settles; then it starts at full speed")
     carried_mass: Optional[PositiveFloat] = Field(
         None, description="free sinkage: the axis moves freely along z (its z velocity starts at velocity[2]) "
                           "carrying this mass [kg] (the wheel's own and its load: weight carried_mass x |g|) "

@@ -62,7 +62,7 @@ def rotation_matrix(axis_unit, angle: float) -> np.ndarray:
 class MovingFrame:
     """The rigid motion x = c0 + V t + R(t) (p - c0) of a solid's `motion:` entry (see the module docstring)."""
 
-    def __init__(self, axis_point, angular_velocity, velocity, carried_mass=None):
+    def __init__(self, axis_point, angular_velocity, velocity, carried_mass=None, start=0.0):
         self.axis_point = np.asarray(axis_point, dtype=float).copy()
         self.angular_velocity = np.asarray(angular_velocity, dtype=float).copy()
         self.velocity = np.asarray(velocity, dtype=float).copy()
@@ -74,18 +74,32 @@ class MovingFrame:
         self.acceleration = np.zeros(3)
         if self.carried_mass is not None:
             self.velocity[2] = 0.0
+        self.start = float(start)  # before it the frame rests (motion.start)
+        self._resting = np.zeros(3)
         self.spin = float(np.linalg.norm(self.angular_velocity))
         self.axis = self.angular_velocity / self.spin if self.spin > 0.0 else np.array([0.0, 0.0, 1.0])
 
+    def moving(self, time: float) -> bool:
+        """Has the motion begun (motion.start)?"""
+        return time >= self.start
+
+    def elapsed(self, time: float) -> float:
+        return max(0.0, time - self.start)
+
     def rotation(self, time: float) -> np.ndarray:
-        return rotation_matrix(self.axis, self.spin * time)
+        return rotation_matrix(self.axis, self.spin * self.elapsed(time))
 
     def centre(self, time: float) -> np.ndarray:
         """Where the axis point is at `time` (free sinkage: at the height the last advance reached)."""
-        return self.axis_point + self.velocity * time + np.array([0.0, 0.0, self.height])
+        return self.axis_point + self.velocity * self.elapsed(time) + np.array([0.0, 0.0, self.height])
 
-    @property
-    def translation_velocity(self) -> np.ndarray:
+    def spin_vector(self, time: float) -> np.ndarray:
+        """The angular velocity at `time` (zero before the start)."""
+        return self.angular_velocity if self.moving(time) else self._resting
+
+    def translation_velocity(self, time: float) -> np.ndarray:
+        if not self.moving(time):
+            return self._resting
         return self.velocity + np.array([0.0, 0.0, self.height_rate])
 
     def chord_velocities(self, body_positions, time: float, interval: float) -> np.ndarray:
@@ -93,7 +107,11 @@ class MovingFrame:
         advance that starts now (a free axis moves with its current rate h' over it)."""
         body = np.asarray(body_positions, float) - self.axis_point
         turned = body @ (self.rotation(time + interval) - self.rotation(time)).T
-        return self.translation_velocity + turned / interval
+        # The prescribed part from the centre's path (through a start, too), the free axis's from its rate.
+        shift = self.velocity * (self.elapsed(time + interval) - self.elapsed(time))
+        if self.moving(time):
+            shift = shift + np.array([0.0, 0.0, self.height_rate * interval])
+        return (shift + turned) / interval
 
     def kick(self, vertical_force: float, gravity_z: float, interval: float) -> None:
         """Free sinkage, before an advance of `interval`: h' += interval (F_z / M + g_z)."""
@@ -127,13 +145,13 @@ class MovingFrame:
         """World velocities V + omega x R (p - c0) + R u' (n, 3)."""
         rotation = self.rotation(time)
         arms = (np.asarray(body_positions, float) - self.axis_point) @ rotation.T
-        return (self.translation_velocity + np.cross(self.angular_velocity, arms)
+        return (self.translation_velocity(time) + np.cross(self.spin_vector(time), arms)
                 + np.asarray(body_velocities, float) @ rotation.T)
 
     def frame_velocities(self, world_positions, time: float) -> np.ndarray:
         """Velocity (n, 3) of the frame's material at world positions: V + omega x (x - c(t))."""
-        return self.translation_velocity + np.cross(self.angular_velocity,
-                                                    np.asarray(world_positions, float) - self.centre(time))
+        return self.translation_velocity(time) + np.cross(self.spin_vector(time),
+                                                          np.asarray(world_positions, float) - self.centre(time))
 
     def vectors_to_body(self, vectors, time: float) -> np.ndarray:
         """R(t)^T v for rows v (n, 3): world components to body-frame components."""

@@ -96,8 +96,8 @@ class Solid(kinds.StateComponent):
         self.damping_alpha, self.damping_beta = config.damping.alpha, config.damping.beta
         motion = getattr(config, "motion", None)
         # A prescribed rigid motion the solid deforms relative to (frame.py); None: a fixed frame.
-        self.frame = (MovingFrame(motion.axis_point, motion.angular_velocity, motion.velocity, motion.carried_mass)
-                      if motion is not None else None)
+        self.frame = (MovingFrame(motion.axis_point, motion.angular_velocity, motion.velocity, motion.carried_mass,
+                                  motion.start) if motion is not None else None)
 
         thermal = config.thermal if config.thermal is not None else (ThermalConfig() if heat else None)
         if thermal is not None:
@@ -149,6 +149,7 @@ class Solid(kinds.StateComponent):
             self._frame_load_vec = self.stiffness.createVecRight()  # gravity turned into the frame + centrifugal
             self._frame_base_vec = self.stiffness.createVecRight()  # base load + frame load of the step
             self._centrifugal_reference = np.zeros(3 * self.n_owned_nodes)
+            self._no_centrifugal_load = np.zeros(3 * self.n_owned_nodes)  # before motion.start
             centrifugal_reference_load(mesh.points, mesh.cells, self.n_owned_nodes, self.element.mass_values,
                                        self.element.mass_weights, self.density, self.frame.angular_velocity,
                                        self.frame.axis_point, self._centrifugal_reference)
@@ -475,8 +476,10 @@ class Solid(kinds.StateComponent):
         # Gravity and, with a free axis, the frame's acceleration (-m a, like a body force) in the frame's axes.
         effective = np.asarray(self.gravity, float) - frame.acceleration
         body_gravity = frame.vectors_to_body(effective[None, :], self.time)[0]
-        frame_load(self.displacement_vec.getArray(readonly=True), self._lumped_mass_values, self._centrifugal_reference,
-                   self._gravity_unit_loads, body_gravity, frame.angular_velocity, self._frame_load_vec.getArray())
+        spinning = frame.moving(self.time)
+        frame_load(self.displacement_vec.getArray(readonly=True), self._lumped_mass_values,
+                   self._centrifugal_reference if spinning else self._no_centrifugal_load, self._gravity_unit_loads,
+                   body_gravity, frame.spin_vector(self.time), self._frame_load_vec.getArray())
 
     def _advance(self, dt: float, clear_nodal: bool) -> None:
         base_load = self._base_load_vec
@@ -510,7 +513,7 @@ class Solid(kinds.StateComponent):
         if self.frame is not None:
             velocities = self.velocity_vec.getArray()
             coriolis_correction(self.displacement_vec.getArray(), velocities, velocity_before, self._constrained,
-                                self.frame.angular_velocity, dt)
+                                self.frame.spin_vector(self.time), dt)
             self.frame_work_local += load_work(self._frame_load_vec.getArray(readonly=True), velocity_before,
                                                self.velocity_vec.getArray(readonly=True), self._constrained, dt)
         self._external_work_local += work

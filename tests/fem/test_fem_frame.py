@@ -152,3 +152,20 @@ def test_gravity_turns_with_the_frame_hanging_bar():
     assert np.hypot(elastic_world[0], elastic_world[1]) < 0.01 * start_deflection
     assert elastic_world[2] == pytest.approx(-stretch, rel=0.02)
     assert np.allclose(solid.positions[tip][0], [0.0, 0.0, -length + elastic_world[2]], atol=0.01 * start_deflection)
+
+
+def test_motion_start_holds_the_frame_until_then():
+    """motion.start: before it the frame rests (no spin, no travel, a free axis held); from it the motion runs
+    as if started at that time, and an advance straddling the start moves by exactly the part after it."""
+    frame = MovingFrame(axis_point=[0.0, 0.0, 0.0], angular_velocity=[0.0, 2.0, 0.0], velocity=[0.5, 0.0, 0.0],
+                        carried_mass=1.0, start=0.3)
+    body = np.array([[0.1, 0.0, 0.0], [0.0, 0.02, -0.1]])
+    assert np.array_equal(frame.to_world(body, 0.2), body)
+    assert np.array_equal(frame.world_velocities(body, 0 * body, 0.2), 0 * body)
+    later = MovingFrame(axis_point=[0.0, 0.0, 0.0], angular_velocity=[0.0, 2.0, 0.0], velocity=[0.5, 0.0, 0.0],
+                        carried_mass=1.0)
+    assert np.allclose(frame.to_world(body, 0.5), later.to_world(body, 0.2), atol=1e-15)
+    # An advance from 0.25 to 0.35 s: the frame moved only over 0.30 .. 0.35 s.
+    chord = frame.chord_velocities(body, 0.25, 0.1)
+    assert np.allclose(chord * 0.1, frame.to_world(body, 0.35) - frame.to_world(body, 0.25), atol=1e-15)
+    assert frame.moving(0.3) and not frame.moving(0.2999)
