@@ -26,6 +26,13 @@ def arrays(comm, n=200):
     return {"ids": ids, "positions": rng.random((len(ids), 3))}
 
 
+def say(line: str) -> None:
+    """One write per line: two ranks share the pipe, and print() writes the text and its newline apart
+    (under load another rank's line landed between them)."""
+    sys.stdout.write(line + "\n")
+    sys.stdout.flush()
+
+
 def main():
     folder, where = Path(sys.argv[1]), sys.argv[2]
     comm = MPI.COMM_WORLD
@@ -40,17 +47,17 @@ def main():
         ckpt._write_at = full_disk
     try:
         ckpt.write_checkpoint(ckpt.checkpoint_path(folder, 2), comm, arrays(comm), attributes={"step": 2})
-        print(f"rank {comm.rank}: no error", flush=True)
+        say(f"rank {comm.rank}: no error")
     except CheckpointError as error:
-        print(f"rank {comm.rank}: {error.problem}", flush=True)
+        say(f"rank {comm.rank}: {error.problem}")
     comm.Barrier()
     if comm.rank == 0:
         left = sorted(path.name for path in folder.iterdir())
-        print(f"files: {' '.join(left)}", flush=True)
+        say(f"files: {' '.join(left)}")
     checkpoint = ckpt.read_checkpoint(good, comm)
     total = comm.allreduce(len(checkpoint.particles["ids"]))
     if comm.rank == 0:
-        print(f"previous checkpoint readable: {total} particles", flush=True)
+        say(f"previous checkpoint readable: {total} particles")
 
 
 if __name__ == "__main__":
