@@ -592,6 +592,8 @@ class Solid(kinds.StateComponent):
     def world_displacements(self) -> np.ndarray:
         """positions - reference positions (n_owned, 3) [m]: the displacement a viewer sees (with motion it
         holds the rigid motion too; `displacements` is the elastic part, in the frame's axes)."""
+        if self.frame is None:
+            return self.displacements  # exactly u (positions - X would round)
         return self.positions - self.mesh.points[: self.n_owned_nodes]
 
     @property
