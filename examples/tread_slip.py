@@ -53,7 +53,8 @@ def run(scene_path: Path, slip: float, out: Path, ranks: int) -> Path:
     return target
 
 
-def bed_surface(run_dir: Path, speed: float, start: float, stop: float, half_width: float) -> float:
+def bed_surface(run_dir: Path, speed: float, start: float, stop: float, half_width: float,
+                motion_start: float = 0.0) -> float:
     """Height [m] of the bed's surface between start and stop [m] ahead of the axle (negative: behind it) at
     the last output step, within |y| < half_width: the mean over 1 cm bins along x of the highest particle
     top (centre + radius) in each bin."""
@@ -63,7 +64,7 @@ def bed_surface(run_dir: Path, speed: float, start: float, stop: float, half_wid
         steps = sorted(name for name in handle if name.startswith("step_"))
         last = handle[steps[-1]]
         positions, radii, time = last["positions"][...], last["radii"][...], float(last.attrs["time"])
-    axle = speed * time
+    axle = speed * max(0.0, time - motion_start)
     tops = []
     for left in np.arange(axle + start, axle + stop - 1e-9, 0.01):
         inside = ((positions[:, 0] >= left) & (positions[:, 0] < left + 0.01)
@@ -73,7 +74,7 @@ def bed_surface(run_dir: Path, speed: float, start: float, stop: float, half_wid
     return float(np.mean(tops)) if tops else float("nan")
 
 
-def summarize(run_dir: Path, window_start: float, speed: float) -> dict:
+def summarize(run_dir: Path, window_start: float, speed: float, motion_start: float = 0.0) -> dict:
     from pdemfem.plot import read_history
 
     history = read_history(run_dir / "history.csv")
@@ -81,12 +82,15 @@ def summarize(run_dir: Path, window_start: float, speed: float) -> dict:
     traction = history["mean_force_wheel_x"][window]
     load = history["mean_force_wheel_z"][window]
     # The level bed 4-12 cm ahead of the axle, and the rut the wheel (40 mm wide) leaves 6-12 cm behind it.
-    surface = bed_surface(run_dir, speed, 0.04, 0.12, 0.034)
-    rut = bed_surface(run_dir, speed, -0.12, -0.06, 0.015)
+    surface = bed_surface(run_dir, speed, 0.04, 0.12, 0.034, motion_start)
+    rut = bed_surface(run_dir, speed, -0.12, -0.06, 0.015, motion_start)
+    # A free axis (motion.carried_mass) finds its own height; a prescribed one stays at z = 0.
+    axle = float(history["axle_height_wheel"][window].mean()) if "axle_height_wheel" in history else 0.0
     return {"traction": float(traction.mean()), "traction_std": float(traction.std()),
             "load": float(load.mean()), "load_std": float(load.std()),
             "traction_coefficient": float(traction.mean() / load.mean()),
-            "sinkage": float(surface + LUG_TIP_RADIUS), "rut_depth": float(surface - rut),
+            "sinkage": float(surface - (axle - LUG_TIP_RADIUS)), "rut_depth": float(surface - rut),
+            "axle_height": axle,
             "frame_work": float(history["frame_work"][-1]),
             "rows": int(window.sum())}
 
@@ -98,7 +102,7 @@ def plot(results: dict, png: Path) -> None:
     from matplotlib import pyplot
 
     slips = sorted(results)
-    figure, (forces, ratio) = pyplot.subplots(1, 2, figsize=(9, 3.8))
+    figure, (forces, ratio, depth) = pyplot.subplots(1, 3, figsize=(13, 3.8))
     forces.errorbar(slips, [results[s]["traction"] for s in slips], [results[s]["traction_std"] for s in slips],
                     marker="o", capsize=3, label="traction F_x")
     forces.errorbar(slips, [results[s]["load"] for s in slips], [results[s]["load_std"] for s in slips],
@@ -113,8 +117,15 @@ def plot(results: dict, png: Path) -> None:
     ratio.set_xlabel("slip s")
     ratio.set_ylabel("F_x / F_z")
     ratio.grid(alpha=0.3)
-    figure.suptitle("lugged wheel at a fixed axle height in gravel (mean and spread over the level bed)",
-                    fontsize="medium")
+    depth.plot(slips, [1000 * results[s]["sinkage"] for s in slips], marker="o", label="lug-tip sinkage")
+    depth.plot(slips, [1000 * results[s]["rut_depth"] for s in slips], marker="s", label="rut depth behind")
+    depth.set_xlabel("slip s")
+    depth.set_ylabel("[mm]")
+    depth.legend(fontsize="small")
+    depth.grid(alpha=0.3)
+    free = any("axle_height" in r and r["axle_height"] != 0.0 for r in results.values())
+    figure.suptitle(("lugged wheel sinking freely under its load" if free else "lugged wheel at a fixed axle height")
+                    + " in gravel (mean and spread over the level bed)", fontsize="medium")
     figure.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(png, dpi=110)
@@ -132,11 +143,12 @@ def main(argv=None) -> int:
     parser.add_argument("--png", type=Path, default=None, help="plot file (default <out>/tread_slip.png)")
     parser.add_argument("--reuse", action="store_true", help="summarize existing runs in --out, run nothing")
     args = parser.parse_args(argv)
-    speed = float(yaml.safe_load(args.scene.read_text())["solids"][0]["motion"]["velocity"][0])
+    motion = yaml.safe_load(args.scene.read_text())["solids"][0]["motion"]
+    speed, motion_start = float(motion["velocity"][0]), float(motion.get("start", 0.0))
     results = {}
     for slip in args.slips:
         target = args.out / f"slip_{slip:.2f}" if args.reuse else run(args.scene, slip, args.out, args.ranks)
-        results[slip] = summarize(target, args.window_start, speed)
+        results[slip] = summarize(target, args.window_start, speed, motion_start)
     print(f"{'slip':>5} {'traction F_x [N]':>18} {'load F_z [N]':>14} {'F_x/F_z':>8} {'sinkage [mm]':>13} "
           f"{'rut depth [mm]':>15}")
     for slip in sorted(results):
