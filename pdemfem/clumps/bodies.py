@@ -39,6 +39,8 @@ from pdemfem.clumps.quaternion import quaternion_conjugates, quaternion_products
 from pdemfem.clumps.rigid_body import (angular_momenta_from_velocities, angular_velocities_from_momenta,
                                        drift_bodies, kick_bodies, member_states, rotational_energies,
                                        sum_member_loads)
+from pdemfem.particles.energy import particle_energy_sums
+from pdemfem.particles.integrate import keep_largest
 
 BODY_FIELD = "clump_body"
 OFFSET_FIELD = "clump_offset"
@@ -68,10 +70,7 @@ def drift_free_spheres(owned_count, body, positions, velocities, dt, positions_a
             positions[i, axis] += dt * velocities[i, axis]
             offset = positions[i, axis] - positions_at_build[i, axis]
             displacement_squared += offset * offset
-        if not displacement_squared < np.inf:
-            largest = np.inf
-        elif displacement_squared > largest:
-            largest = displacement_squared
+        largest = keep_largest(largest, displacement_squared)
     return largest
 
 
@@ -90,10 +89,7 @@ def scatter_members(rows, member_positions, member_velocities, member_spins, pos
             angular_velocities[i, axis] = member_spins[k, axis]
             offset = positions[i, axis] - positions_at_build[i, axis]
             displacement_squared += offset * offset
-        if not displacement_squared < np.inf:
-            largest = np.inf
-        elif displacement_squared > largest:
-            largest = displacement_squared
+        largest = keep_largest(largest, displacement_squared)
     return largest
 
 
@@ -103,34 +99,6 @@ def gather_member_loads(rows, forces, torques, member_forces, member_torques):
         for axis in range(3):
             member_forces[k, axis] = forces[rows[k], axis]
             member_torques[k, axis] = torques[rows[k], axis]
-
-
-@njit(cache=True)
-def free_sphere_energy_sums(owned_count, body, mass, velocities, angular_velocities, inverse_inertia, positions,
-                            gravity):
-    """pdemfem.particles.energy.particle_energy_sums over the single spheres (members are counted with
-    their bodies); the largest squared speed is over every row, members included."""
-    kinetic = 0.0
-    rotational = 0.0
-    potential = 0.0
-    fastest = 0.0
-    for i in range(owned_count):
-        speed_squared = 0.0
-        spin_squared = 0.0
-        height = 0.0
-        for axis in range(3):
-            speed_squared += velocities[i, axis] * velocities[i, axis]
-            spin_squared += angular_velocities[i, axis] * angular_velocities[i, axis]
-            height += positions[i, axis] * gravity[axis]
-        if body[i] < 0:
-            kinetic += mass[i] * speed_squared
-            rotational += spin_squared / inverse_inertia[i]
-            potential -= mass[i] * height
-        if speed_squared > fastest:
-            fastest = speed_squared
-        elif speed_squared != speed_squared:  # NaN
-            fastest = np.inf
-    return 0.5 * kinetic, 0.5 * rotational, potential, fastest
 
 
 class ClumpBodies(kinds.StateComponent):
@@ -306,9 +274,9 @@ class ClumpBodies(kinds.StateComponent):
     # ------------------------------------------------------------------ energies
     def energy_sums(self, state, gravity):
         """(kinetic, rotational, potential, largest squared speed) of the free spheres and the bodies."""
-        kinetic, rotational, potential, fastest = free_sphere_energy_sums(
-            state.owned_count, state.fields[BODY_FIELD], state.mass, state.velocities, state.angular_velocities,
-            state.inverse_inertia, state.positions, gravity)
+        kinetic, rotational, potential, fastest = particle_energy_sums(
+            state.owned_count, state.mass, state.velocities, state.angular_velocities, state.inverse_inertia,
+            state.positions, gravity, state.fields[BODY_FIELD])
         spins = np.zeros(self.count)
         rotational_energies(self.count, self.orientations, self.angular_momenta, self.principal_moments, spins)
         kinetic += 0.5 * float(np.sum(self.masses * np.einsum("ij,ij->i", self.velocities, self.velocities)))

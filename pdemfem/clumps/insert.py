@@ -21,6 +21,7 @@ from numba import njit
 from pdemfem.clumps.quaternion import quaternion_products, rotation_matrices, rotation_matrix
 from pdemfem.clumps.template import clump_template
 from pdemfem.errors import SceneError
+from pdemfem.particles.placement_grid import overlaps_stored, store_sphere
 
 # |q| may differ from 1 by this much in a scene (four digits typed by hand); it is then normalised.
 UNIT_TOLERANCE = 1e-3
@@ -134,14 +135,6 @@ def _random_clumps(group, where, template, placed_positions, placed_radii):
 
 
 @njit(cache=True)
-def _cell_of(point, grid_lower, cell_size, dimensions):
-    c = np.empty(3, dtype=np.int64)
-    for axis in range(3):
-        c[axis] = min(max(int((point[axis] - grid_lower[axis]) / cell_size), 0), dimensions[axis] - 1)
-    return c
-
-
-@njit(cache=True)
 def _random_place_clumps(lower, upper, count, offsets, radii, given, use_given, fixed_positions, fixed_radii,
                          cell_size, dimensions, grid_lower, max_attempts, seed):
     """Random sequential addition of clumps (centre in [lower, upper], random or given orientation)
@@ -157,13 +150,8 @@ def _random_place_clumps(lower, upper, count, offsets, radii, given, use_given, 
     next_in_cell = -np.ones(total, dtype=np.int64)
     stored = 0
     for k in range(fixed_positions.shape[0]):
-        all_positions[stored] = fixed_positions[k]
-        all_radii[stored] = fixed_radii[k]
-        c = _cell_of(fixed_positions[k], grid_lower, cell_size, dimensions)
-        cell = c[0] + nx * (c[1] + ny * c[2])
-        next_in_cell[stored] = cell_head[cell]
-        cell_head[cell] = stored
-        stored += 1
+        stored = store_sphere(fixed_positions[k], fixed_radii[k], stored, all_positions, all_radii, cell_head,
+                              next_in_cell, grid_lower, cell_size, dimensions)
     centres = np.empty((count, 3))
     orientations = np.empty((count, 4))
     rotation = np.empty((3, 3))
@@ -193,24 +181,9 @@ def _random_place_clumps(lower, upper, count, offsets, radii, given, use_given, 
                     candidate_members[m, axis] = (centre[axis] + rotation[axis, 0] * offsets[m, 0]
                                                   + rotation[axis, 1] * offsets[m, 1]
                                                   + rotation[axis, 2] * offsets[m, 2])
-                c = _cell_of(candidate_members[m], grid_lower, cell_size, dimensions)
-                for dz in range(-1, 2):
-                    for dy in range(-1, 2):
-                        for dx in range(-1, 2):
-                            x, y, z = c[0] + dx, c[1] + dy, c[2] + dz
-                            if x < 0 or y < 0 or z < 0 or x >= nx or y >= ny or z >= nz:
-                                continue
-                            other = cell_head[x + nx * (y + ny * z)]
-                            while other >= 0 and free:
-                                distance = 0.0
-                                for axis in range(3):
-                                    offset = candidate_members[m, axis] - all_positions[other, axis]
-                                    distance += offset * offset
-                                limit = radii[m] + all_radii[other]
-                                if distance < limit * limit:
-                                    free = False
-                                other = next_in_cell[other]
-                if not free:
+                if overlaps_stored(candidate_members[m], radii[m], all_positions, all_radii, cell_head, next_in_cell,
+                                   grid_lower, cell_size, dimensions):
+                    free = False
                     break
             if free:
                 for axis in range(3):
@@ -218,13 +191,8 @@ def _random_place_clumps(lower, upper, count, offsets, radii, given, use_given, 
                 for k in range(4):
                     orientations[p, k] = q[k]
                 for m in range(members):
-                    all_positions[stored] = candidate_members[m]
-                    all_radii[stored] = radii[m]
-                    c = _cell_of(candidate_members[m], grid_lower, cell_size, dimensions)
-                    cell = c[0] + nx * (c[1] + ny * c[2])
-                    next_in_cell[stored] = cell_head[cell]
-                    cell_head[cell] = stored
-                    stored += 1
+                    stored = store_sphere(candidate_members[m], radii[m], stored, all_positions, all_radii, cell_head,
+                                          next_in_cell, grid_lower, cell_size, dimensions)
                 success = True
                 break
         if not success:

@@ -5,11 +5,20 @@ import numpy as np
 from numba import njit
 
 
+# Every row is a single sphere (no clumps): what particle_energy_sums takes as clump_body then.
+NO_CLUMP_BODIES = np.empty(0, dtype=np.int64)
+
+
 @njit(cache=True)
-def particle_energy_sums(owned_count, mass, velocities, angular_velocities, inverse_inertia, positions, gravity):
+def particle_energy_sums(owned_count, mass, velocities, angular_velocities, inverse_inertia, positions, gravity,
+                         clump_body):
     """(kinetic, rotational, gravitational potential -m g.x, largest squared speed) of rows [0, owned_count).
 
-    A non-finite velocity makes the largest squared speed inf (a plain maximum would skip NaN)."""
+    Rows with clump_body[i] >= 0 are members of a rigid clump, whose energies are counted with its body
+    (pdemfem.clumps.bodies): they are left out of the sums, not of the largest speed.  An empty clump_body
+    (NO_CLUMP_BODIES): every row is a sphere.  A non-finite velocity makes the largest squared speed inf
+    (a plain maximum would skip NaN)."""
+    every_row = clump_body.shape[0] == 0
     kinetic = 0.0
     rotational = 0.0
     potential = 0.0
@@ -22,9 +31,10 @@ def particle_energy_sums(owned_count, mass, velocities, angular_velocities, inve
             speed_squared += velocities[i, axis] * velocities[i, axis]
             spin_squared += angular_velocities[i, axis] * angular_velocities[i, axis]
             height += positions[i, axis] * gravity[axis]
-        kinetic += mass[i] * speed_squared
-        rotational += spin_squared / inverse_inertia[i]
-        potential -= mass[i] * height
+        if every_row or clump_body[i] < 0:
+            kinetic += mass[i] * speed_squared
+            rotational += spin_squared / inverse_inertia[i]
+            potential -= mass[i] * height
         if speed_squared > fastest:
             fastest = speed_squared
         elif speed_squared != speed_squared:  # NaN

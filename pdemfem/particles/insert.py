@@ -18,6 +18,7 @@ from numba import njit
 from pdemfem.clumps.insert import place_clump_group
 from pdemfem.errors import SceneError
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
+from pdemfem.particles.placement_grid import overlaps_stored, store_sphere
 
 
 @dataclass
@@ -107,15 +108,8 @@ def _random_place(lower, upper, radii, fixed_positions, fixed_radii, cell_size, 
     next_in_cell = -np.ones(total, dtype=np.int64)
     stored = 0
     for k in range(fixed_positions.shape[0]):
-        all_positions[stored] = fixed_positions[k]
-        all_radii[stored] = fixed_radii[k]
-        c = np.empty(3, dtype=np.int64)
-        for axis in range(3):
-            c[axis] = min(max(int((fixed_positions[k, axis] - grid_lower[axis]) / cell_size), 0), dimensions[axis] - 1)
-        cell = c[0] + nx * (c[1] + ny * c[2])
-        next_in_cell[stored] = cell_head[cell]
-        cell_head[cell] = stored
-        stored += 1
+        stored = store_sphere(fixed_positions[k], fixed_radii[k], stored, all_positions, all_radii, cell_head,
+                              next_in_cell, grid_lower, cell_size, dimensions)
     placed = 0
     positions = np.empty((radii.shape[0], 3))
     for p in range(radii.shape[0]):
@@ -127,34 +121,11 @@ def _random_place(lower, upper, radii, fixed_positions, fixed_radii, cell_size, 
                 low = lower[axis] + radius
                 high = upper[axis] - radius
                 candidate[axis] = low + (high - low) * np.random.random()
-            c = np.empty(3, dtype=np.int64)
-            for axis in range(3):
-                c[axis] = min(max(int((candidate[axis] - grid_lower[axis]) / cell_size), 0), dimensions[axis] - 1)
-            free = True
-            for dz in range(-1, 2):
-                for dy in range(-1, 2):
-                    for dx in range(-1, 2):
-                        x, y, z = c[0] + dx, c[1] + dy, c[2] + dz
-                        if x < 0 or y < 0 or z < 0 or x >= nx or y >= ny or z >= nz:
-                            continue
-                        other = cell_head[x + nx * (y + ny * z)]
-                        while other >= 0 and free:
-                            distance = 0.0
-                            for axis in range(3):
-                                offset = candidate[axis] - all_positions[other, axis]
-                                distance += offset * offset
-                            limit = radius + all_radii[other]
-                            if distance < limit * limit:
-                                free = False
-                            other = next_in_cell[other]
-            if free:
+            if not overlaps_stored(candidate, radius, all_positions, all_radii, cell_head, next_in_cell, grid_lower,
+                                   cell_size, dimensions):
                 positions[p] = candidate
-                all_positions[stored] = candidate
-                all_radii[stored] = radius
-                cell = c[0] + nx * (c[1] + ny * c[2])
-                next_in_cell[stored] = cell_head[cell]
-                cell_head[cell] = stored
-                stored += 1
+                stored = store_sphere(candidate, radius, stored, all_positions, all_radii, cell_head, next_in_cell,
+                                      grid_lower, cell_size, dimensions)
                 placed += 1
                 success = True
                 break

@@ -7,6 +7,17 @@ import numpy as np
 from numba import njit
 
 
+@njit(inline="always", cache=True)
+def keep_largest(largest, displacement_squared):
+    """The running largest squared displacement; inf once one is not finite (a plain maximum would skip
+    NaN: the caller rebuilds at once and the rebuild removes the blown-up particle)."""
+    if not displacement_squared < np.inf:
+        return np.inf
+    if displacement_squared > largest:
+        return displacement_squared
+    return largest
+
+
 @njit(cache=True)
 def kick(owned_count, velocities, angular_velocities, forces, torques, inverse_mass, inverse_inertia, gravity,
          half_dt):
@@ -34,10 +45,7 @@ def kick_drift(owned_count, positions, velocities, angular_velocities, forces, t
             positions[i, axis] += dt * velocity
             offset = positions[i, axis] - positions_at_build[i, axis]
             displacement_squared += offset * offset
-        if not displacement_squared < np.inf:
-            largest = np.inf
-        elif displacement_squared > largest:
-            largest = displacement_squared
+        largest = keep_largest(largest, displacement_squared)
     return largest
 
 
@@ -56,10 +64,7 @@ def drift(owned_count, positions, velocities, dt, positions_at_build):
             positions[i, axis] += dt * velocities[i, axis]
             offset = positions[i, axis] - positions_at_build[i, axis]
             displacement_squared += offset * offset
-        if not displacement_squared < np.inf:
-            largest = np.inf
-        elif displacement_squared > largest:
-            largest = displacement_squared
+        largest = keep_largest(largest, displacement_squared)
     return largest
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem import state_dict as kinds
-from pdemfem.particles.energy import particle_energy_sums
+from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
 
 
 class Outlets(kinds.StateComponent):
@@ -70,7 +70,7 @@ class Outlets(kinds.StateComponent):
         rows = np.flatnonzero(taken)
         kinetic, rotational, potential, _ = particle_energy_sums(
             len(rows), state.mass[rows], state.velocities[rows], state.angular_velocities[rows],
-            state.inverse_inertia[rows], state.positions[rows], np.asarray(gravity, dtype=float))
+            state.inverse_inertia[rows], state.positions[rows], np.asarray(gravity, dtype=float), NO_CLUMP_BODIES)
         count = len(self.names)
         totals = np.concatenate([np.bincount(outlet[rows], minlength=count).astype(float),
                                  np.bincount(outlet[rows], weights=state.mass[rows], minlength=count),

@@ -31,7 +31,7 @@ from numba import njit
 from pdemfem import state_dict as kinds
 from pdemfem.errors import SceneError
 from pdemfem.parallel.exchange import allgather_rows
-from pdemfem.particles.energy import particle_energy_sums
+from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
 from pdemfem.particles.insert import _random_place
 from pdemfem.particles.state import ParticleState
 from pdemfem.scene.derived import group_radius_range
@@ -209,7 +209,7 @@ class ParticleStreams(kinds.StateComponent):
             new.append_particles(batch)
         kinetic, rotational, potential, _ = particle_energy_sums(
             new.count, new.mass, new.velocities, new.angular_velocities, new.inverse_inertia, new.positions,
-            self.gravity)
+            self.gravity, NO_CLUMP_BODIES)
         self.energy_in += kinetic + rotational + potential
         # Each rank keeps the particles in its own box; the others are another rank's.
         new.keep(np.flatnonzero(system.decomposition.owners(new.positions) == system.comm.rank))

@@ -46,7 +46,7 @@ from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import Decomposition, recursive_bisection
 from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.parallel.reductions import StepReductions
-from pdemfem.particles.energy import particle_energy_sums
+from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
 from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES, HeatLedger, heat_content, update_temperatures
 from pdemfem.particles.integrate import kick, kick_drift, outside_domain
 
@@ -478,7 +478,7 @@ class ParticleSystem(kinds.StateComponent):
         else:
             kinetic, rotational, potential, fastest_squared = particle_energy_sums(
                 state.owned_count, state.mass, state.velocities, state.angular_velocities, state.inverse_inertia,
-                state.positions, self.gravity)
+                state.positions, self.gravity, NO_CLUMP_BODIES)
         thermal = (heat_content(state.owned_count, state.temperatures, state.mass, state.material_index,
                                 self.heat_capacities) if self.heat else 0.0)
         local = np.array([kinetic, rotational, potential, thermal])
