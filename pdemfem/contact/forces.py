@@ -13,7 +13,7 @@ import math
 from numba import njit
 
 from pdemfem.contact.conduction import contact_conductance
-from pdemfem.contact.layout import COHESIVE, HEAT
+from pdemfem.contact.layout import COHESIVE, HEAT, ROLLING_ANY
 from pdemfem.contact.registry import history_layout
 from pdemfem.contact.response import (clear_history, cohesive_contact_holds, contact_response, released_energy,
                                       rigid_wall_contact)
@@ -93,9 +93,10 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             else:
                 booked = ids[j] < ids[i]
             overlap = radius_sum - distance
-            nx = dx / distance
-            ny = dy / distance
-            nz = dz / distance
+            inverse_distance = 1.0 / distance
+            nx = dx * inverse_distance
+            ny = dy * inverse_distance
+            nz = dz * inverse_distance
             lever_i = radius_i - 0.5 * overlap
             lever_j = radii[j] - 0.5 * overlap
             wxi = angular_velocities[i, 0]
@@ -113,7 +114,9 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             vz = velocities[i, 2] - velocities[j, 2] - (sx * ny - sy * nx)
             effective_mass = mass[i] * mass[j] / (mass[i] + mass[j])
             effective_radius = radius_i * radii[j] / radius_sum
-            effective_inertia = 1.0 / (inverse_inertia[i] + inverse_inertia[j])
+            effective_inertia = 0.0  # only rolling models use it: a division saved per contact without them
+            if composition & ROLLING_ANY:
+                effective_inertia = 1.0 / (inverse_inertia[i] + inverse_inertia[j])
             fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = contact_response(
                 composition, coefficients, material_i, material_j, nx, ny, nz, overlap, vx, vy, vz,
                 wxi - wxj, wyi - wyj, wzi - wzj, effective_mass, effective_radius, effective_inertia,

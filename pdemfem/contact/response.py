@@ -160,9 +160,12 @@ def rigid_wall_contact(composition, i, nx, ny, nz, distance, surface_vx, surface
     vx = velocities[i, 0] - surface_vx - lever * (wy * nz - wz * ny)
     vy = velocities[i, 1] - surface_vy - lever * (wz * nx - wx * nz)
     vz = velocities[i, 2] - surface_vz - lever * (wx * ny - wy * nx)
+    effective_inertia = 0.0  # only rolling models use it
+    if composition & ROLLING_ANY:
+        effective_inertia = 1.0 / inverse_inertia[i]
     fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = contact_response(
         composition, coefficients, material_index[i], wall_row, nx, ny, nz, radii[i] - distance, vx, vy, vz,
-        wx, wy, wz, mass[i], radii[i], 1.0 / inverse_inertia[i], history, slot, dt)
+        wx, wy, wz, mass[i], radii[i], effective_inertia, history, slot, dt)
     forces[i, 0] += fx
     forces[i, 1] += fy
     forces[i, 2] += fz
