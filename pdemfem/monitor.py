@@ -22,7 +22,11 @@ statement of physics (docs/stability.md lists them):
    available since the baseline: its kinetic, rotational, elastic and solid energies at
    the baseline, the largest drop of its potentials seen since, and the work moving walls
    did.  An integration that creates more energy than the scene ever had is diverging.
-5. Thermal step (heat on): the explicit temperature update is stable and overshoot-free while
+5. Overlap: the contact laws are small-overlap laws.  The pair and plane-wall kernels keep the
+   deepest overlap they met (as a fraction of the smaller radius) since the last check; past 1 for
+   two spheres their centres can cross and they pass through each other: the run stops.  Past
+   derived.PEAK_OVERLAP_WARNING (sphere-sphere or sphere-plane) the run warns once.
+6. Thermal step (heat on): the explicit temperature update is stable and overshoot-free while
    dt sum(H) / (m c) <= 1 for every particle (pdemfem.particles.heat); past that the run stops.
    Heat content is not part of the energy test (it is conserved on its own, see docs/heat.md).
 
@@ -99,6 +103,7 @@ class DivergenceMonitor:
             simulation.runaway_displacement = self.smallest_radius + 0.5 * simulation.particle_system.skin
         self.baseline = None
         self.checks = 0
+        self.overlap_warned = False
 
     # ------------------------------------------------------------------ setup
     def _energy_check_skipped(self):
@@ -171,6 +176,8 @@ class DivergenceMonitor:
                        f"a particle moved at {fastest:.3g} m/s, "
                        f"{fastest * sim.dt / self.smallest_radius:.3g} radii in one step (more than the smallest "
                        f"radius: contacts are missed)")
+        # Collective on every rank at every check (it resets the kernels' records).
+        overlap_problem = self._overlap_problem()
         if problem is None and system.heat and system.largest_heat_step_ratio > 1.0:
             raise SolverError(
                 f"run stopped at step {sim.step_count} (t = {sim.time:.6g} s)",
@@ -182,9 +189,35 @@ class DivergenceMonitor:
         if problem is None and self.energy_check_skipped is None:
             problem = self._energy_problem(energies)
         if problem is None:
+            problem = overlap_problem
+        if problem is None:
             return
         raise SolverError(f"run stopped at step {sim.step_count} (t = {sim.time:.6g} s)",
                           problem, self.diagnosis(fastest))
+
+    def _overlap_problem(self):
+        """Collective: the deepest overlaps since the last check (one Allreduce MAX); stop past the smaller
+        radius between two spheres, warn once past PEAK_OVERLAP_WARNING."""
+        from mpi4py import MPI
+
+        system = self.sim.particle_system
+        deepest = system.deepest_overlaps.copy()
+        system.deepest_overlaps[:] = 0.0
+        if self.sim.comm.size > 1:
+            self.sim.comm.Allreduce(MPI.IN_PLACE, deepest, op=MPI.MAX)
+        pair, wall = float(deepest[0]), float(deepest[1])
+        if pair > 1.0:
+            return (f"two particles overlapped by {pair:.3g} of the smaller radius: their centres can cross, and "
+                    f"they pass through each other (the contact is far too soft for the speeds)")
+        if max(pair, wall) > derived.PEAK_OVERLAP_WARNING and not self.overlap_warned:
+            self.overlap_warned = True
+            if self.sim.comm.rank == 0:
+                where = "two particles" if pair >= wall else "a particle and a plane wall"
+                log.warning("by step %d %s overlapped by %.3g of the smaller radius (want <= %g): the contact law "
+                            "is a small-overlap law; use stiffer materials (youngs_modulus, normal_stiffness) or "
+                            "lower the speeds (`pdemfem check` estimates the overlap at the impact speed)",
+                            self.sim.step_count, where, max(pair, wall), derived.PEAK_OVERLAP_WARNING)
+        return None
 
     def _energy_problem(self, energies: dict):
         system = self.sim.particle_system
@@ -245,6 +278,11 @@ def likely_causes(scene, dt: float, fastest: float, smallest_radius: float, thin
             if ratio > 1.0:
                 causes.append(f"tunnelling: {label} at {fastest:.3g} m/s overlaps {ratio:.2g} radii (the material is "
                               f"too soft for that speed: raise youngs_modulus or lower the speed)")
+    if math.isfinite(fastest):
+        for ratio, kind, label in derived.contact_overlaps(scene, fastest):
+            if ratio > 1.0 and kind == "particle_particle":
+                causes.append(f"contacts {label} at {fastest:.3g} m/s overlap {ratio:.2g} of the smaller radius (the "
+                              f"material is too soft for that speed: raise youngs_modulus or lower the speed)")
     causes.extend(derived.start_inside_walls(scene))
     if not math.isfinite(fastest):
         causes.append("a particle has an infinite or NaN velocity (check the initial velocities)")

@@ -142,3 +142,30 @@ def test_restore_records_matches_a_lookup_by_pair(id_stride):
     restore_records(row_particles, offsets, partners, restored, ids, owned_count, records, signs)
     assert np.count_nonzero(np.any(expected != 0.0, axis=1)) > 20
     assert np.array_equal(restored, expected)
+
+
+def test_contact_kernels_report_the_deepest_overlap_over_the_smaller_radius():
+    """Two spheres (r = 1 and 0.5 mm) overlapping by 0.1 mm report 0.1 / 0.5 = 0.2; a 1 mm sphere 0.05 mm into
+    a plane reports 0.05 (exact up to round-off of the distance: 1e-12)."""
+    from pdemfem.contact.forces import pair_forces, plane_wall_forces
+    from pdemfem.contact.layout import COLUMNS, TANGENTIAL
+
+    positions = np.array([[0.0, 0.0, 0.00095], [0.0, 0.0, 0.00235]])  # gap 1.4 mm of a 1.5 mm radius sum
+    radii = np.array([0.001, 0.0005])
+    zeros = np.zeros((2, 3))
+    mass = np.array([1e-5, 1.25e-6])
+    coefficients = np.zeros((2, 2, COLUMNS))
+    coefficients[:, :, 0] = 1e7  # E*
+    coefficients[:, :, 1] = 4e6  # G*
+    history = np.zeros((1, 4))
+    *_, deepest = pair_forces(np.array([0]), np.array([0, 1, 1]), np.array([1], dtype=np.int32), history,
+                              np.arange(2), 2, positions, zeros.copy(), zeros.copy(), radii, mass, np.ones(2),
+                              np.zeros(2, dtype=np.int32), coefficients, TANGENTIAL, 1e-7, zeros.copy(),
+                              zeros.copy(), np.zeros(0), np.zeros((0, 2)))
+    assert deepest == pytest.approx(0.2, abs=1e-12)
+    *_, deepest = plane_wall_forces(np.array([0]), np.array([0]), np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]),
+                                    np.zeros((1, 3)), np.array([1]), np.zeros((2, 1, 4)), positions, zeros.copy(),
+                                    zeros.copy(), radii, mass, np.ones(2), np.zeros(2, dtype=np.int32),
+                                    coefficients, TANGENTIAL, 1e-7, zeros.copy(), zeros.copy(), np.zeros((1, 3)),
+                                    np.zeros(0), np.zeros((0, 2)), np.zeros(1), np.zeros(1))
+    assert deepest == pytest.approx(0.05, abs=1e-12)

@@ -289,3 +289,57 @@ def test_divergence_under_mpi_stops_every_rank_with_exit_3_and_one_message(workd
     assert "the simulation diverged" in completed.stderr and "Traceback" not in completed.stderr
     # The warnings are printed once (rank 0), not once per rank.
     assert completed.stderr.count("warning: time.dt = 0.001 s") == 1, completed.stderr
+
+
+# Two soft steel spheres closing head-on at SPEED m/s (dt auto).  The Hertz peak overlap of the impact
+# scales as E^(-2/5): 3 radii at E = 1 MPa, 0.48 at 100 MPa, 0.19 at 1 GPa.
+CLOSING_PAIR = """\
+time: {end: 0.002, dt: auto}
+gravity: [0, 0, 0]
+materials:
+  steel: {density: 7800, youngs_modulus: MODULUS, poisson_ratio: 0.28}
+interactions:
+  default: {model: hertz_mindlin, restitution: 0.95, friction: 0.0}
+particles:
+  - name: pair
+    material: steel
+    radius: 0.001
+    insert: {kind: list, positions: [[0, 0, 0], [0, 0, 0.0021]], velocities: [[0, 0, 10], [0, 0, -10]]}
+output: {dir: out, every: 0.0005}
+"""
+
+
+def test_spheres_that_would_pass_through_each_other_stop_the_run(capsys, workdir):
+    """So soft a pair at 20 m/s overlaps by more than a radius: the spheres' centres cross and they fly on
+    through each other (before the guard: exit 0 with a negative restitution, -0.97).  check says so,
+    and the run stops with exit 3."""
+    scene = CLOSING_PAIR.replace("MODULUS", "1.0e6")
+    (workdir / "scene.yaml").write_text(scene)
+    assert cli.main(["check", str(workdir / "scene.yaml")]) == 0
+    out, _ = capsys.readouterr()
+    assert "peak overlap is 3 of the smaller radius, so the spheres pass through each other" in out
+    code, _, err = run_cli(capsys, workdir, scene)
+    assert code == 3, err
+    assert "overlapped by" in err and "pass through each other" in err and "Traceback" not in err
+    rows = history(workdir)
+    # It stopped inside the contact (0.45 ms long), before the pair flew apart: ids 0 and 1 still approach.
+    assert float(rows[-1]["time"]) < 0.001
+
+
+@pytest.mark.parametrize("modulus, warned", [("1.0e8", True), ("1.0e9", False)])
+def test_deep_overlaps_are_warned_about_once(capsys, caplog, workdir, modulus, warned):
+    """At E = 100 MPa the impact overlaps ~0.48 radii: the run ends normally (the spheres separate) but
+    warns once, at run time (the "pdemfem" logger), beyond PEAK_OVERLAP_WARNING = 0.25; at 1 GPa (0.19
+    radii) it stays quiet."""
+    code, _, err = run_cli(capsys, workdir, CLOSING_PAIR.replace("MODULUS", modulus))
+    assert code == 0, err
+    logged = [record.getMessage() for record in caplog.records if "overlapped by" in record.getMessage()]
+    assert len(logged) == (1 if warned else 0), logged
+    if warned:
+        # The kernels' record is the impact's deepest overlap: Hertz's undamped peak 0.48 radii, a few per
+        # cent less with the e = 0.95 dashpot (printed to 3 digits).
+        measured = float(logged[0].split("overlapped by ")[1].split()[0])
+        assert 0.45 < measured < 0.48, logged[0]
+    assert ("the peak overlap is" in err) == warned  # check's estimate, repeated by run
+    rows = history(workdir)
+    assert float(rows[-1]["kinetic_energy"]) > 0.8 * float(rows[0]["kinetic_energy"])  # e = 0.95: they bounced

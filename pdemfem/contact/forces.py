@@ -31,12 +31,14 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
     A pair with a ghost is computed on both ranks that own one of its particles
     (each keeps the force on its own particle); its energy and count are booked
     only on the rank owning the lower id, so sums over ranks count it once.
-    Returns (elastic energy, dissipated energy of this step, number of contacts).
+    Returns (elastic energy, dissipated energy of this step, number of contacts, deepest overlap as a
+    fraction of the pair's smaller radius).
     """
     width = history_layout(composition)[3]
     elastic_total = 0.0
     dissipated_total = 0.0
     contacts = 0
+    deepest = 0.0
     for r in range(row_particles.shape[0]):
         i = row_particles[r]
         i_owned = i < owned_count
@@ -93,6 +95,9 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             else:
                 booked = ids[j] < ids[i]
             overlap = radius_sum - distance
+            smaller = radius_i if radius_i < radii[j] else radii[j]
+            if overlap > deepest * smaller:  # divides only when the record grows
+                deepest = overlap / smaller
             inverse_distance = 1.0 / distance
             nx = dx * inverse_distance
             ny = dy * inverse_distance
@@ -149,7 +154,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
                 heat_flows[i, 1] += conductance
                 heat_flows[j, 0] -= flow
                 heat_flows[j, 1] += conductance
-    return elastic_total, dissipated_total, contacts
+    return elastic_total, dissipated_total, contacts, deepest
 
 
 @njit(cache=True)
@@ -165,7 +170,8 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
     Candidates are the owned particles within reach of a wall at the last list build (every
     other pair cannot touch before the next one).  A wall is a flat rigid body (R = inf,
     m = inf); wall_forces[w] receives the force the particles exert on wall w.  wall_history
-    is (particles, walls, history width).  Returns (elastic, dissipated, contacts).
+    is (particles, walls, history width).  Returns (elastic, dissipated, contacts, deepest overlap as a
+    fraction of the particle's radius).
     """
     # One row per (particle, wall): slicing wall_history[i] in the loop would create (and reference-count)
     # an array view per candidate, several times the cost of the test itself.
@@ -175,6 +181,7 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
     elastic_total = 0.0
     dissipated_total = 0.0
     contacts = 0
+    deepest = 0.0
     for candidate in range(candidate_particles.shape[0]):
         i = candidate_particles[candidate]
         w = candidate_walls[candidate]
@@ -205,6 +212,8 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
                                                     radius - previous_distance, mass[i], radius, history, row)
                 clear_history(composition, history, row)
             continue
+        if overlap > deepest * radius:
+            deepest = overlap / radius
         # Contact point on the plane, `distance` below the centre.
         fx, fy, fz, _, _, _, elastic, dissipated, _, _ = rigid_wall_contact(
             composition, i, nx, ny, nz, distance, wall_velocities[w, 0], wall_velocities[w, 1],
@@ -225,4 +234,4 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
                 heat_flows[i, 0] += flow
                 heat_flows[i, 1] += conductance
                 wall_heat[w] += flow * dt
-    return elastic_total, dissipated_total, contacts
+    return elastic_total, dissipated_total, contacts, deepest

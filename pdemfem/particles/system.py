@@ -107,6 +107,9 @@ class ParticleSystem(kinds.StateComponent):
         self.elastic_energy = 0.0
         self.dissipated_energy = 0.0
         self.contact_count = 0
+        # This rank's deepest contact overlap since the run monitor last read it, as a fraction of the smaller
+        # radius: [sphere-sphere, sphere-plane wall] (the monitor reduces and resets it at its checks).
+        self.deepest_overlaps = np.zeros(2)
         self.lost_particles = 0
         self.nonfinite_particles = 0  # of lost_particles: removed because a position became inf/NaN
         self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift
@@ -430,13 +433,13 @@ class ParticleSystem(kinds.StateComponent):
             heat_flows[:] = 0.0
         else:
             temperatures, heat_flows = NO_TEMPERATURES, NO_HEAT_FLOWS
-        elastic, dissipated, contacts = pair_forces(
+        elastic, dissipated, contacts, deepest_pair = pair_forces(
             neighbors.row_particles, neighbors.offsets, neighbors.partners, neighbors.history, state.ids, owned,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition, self.dt,
             state.forces, state.torques, temperatures, heat_flows)
         if walls.count:
-            wall_elastic, wall_dissipated, wall_contacts = plane_wall_forces(
+            wall_elastic, wall_dissipated, wall_contacts, deepest_wall = plane_wall_forces(
                 walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities,
                 walls.material_index, state.wall_history, state.positions, state.velocities,
                 state.angular_velocities, state.radii, state.mass, state.inverse_inertia, state.material_index,
@@ -445,6 +448,10 @@ class ParticleSystem(kinds.StateComponent):
             elastic += wall_elastic
             dissipated += wall_dissipated
             contacts += wall_contacts
+            if deepest_wall > self.deepest_overlaps[1]:
+                self.deepest_overlaps[1] = deepest_wall
+        if deepest_pair > self.deepest_overlaps[0]:
+            self.deepest_overlaps[0] = deepest_pair
         for index, contributor in enumerate(self.contributors, start=walls.count):
             extra_elastic, extra_dissipated, extra_contacts = contributor.add_forces(self, 0, owned)
             if self.heat:

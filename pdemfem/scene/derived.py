@@ -44,6 +44,7 @@ __all__ = [
     "DT_PER_CONTACT",
     "MAX_STEP_TRAVEL",
     "TUNNEL_TRAVEL",
+    "PEAK_OVERLAP_WARNING",
 ]
 
 # Hertz contact duration prefactor: t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5).
@@ -71,6 +72,11 @@ MAX_STEP_TRAVEL = 0.1
 # Mesh walls have no thickness: warn when a particle moves more than this fraction of its radius per
 # step relative to a mesh wall (first-contact overlap up to the travel; beyond ~r the centre crosses).
 TUNNEL_TRAVEL = 0.5
+# The contact laws assume overlaps small beside the radii (Hertz: contact radius a = sqrt(R* delta) << R).
+# Softened DEM materials reach 5-10 % of the radius at their impact speeds; beyond a quarter the contact
+# has left its law's range (check warns; the run monitor warns once), and two spheres overlapping by more
+# than the smaller radius can pass through each other (the run stops).
+PEAK_OVERLAP_WARNING = 0.25
 
 
 # --------------------------------------------------------------------------- per-group helpers
@@ -540,9 +546,14 @@ def _effective_shear_modulus(a: MaterialConfig, b: Optional[MaterialConfig]) -> 
                      for m in (a, b) if m is not None)
 
 
-def _pairs(scene: Scene, with_shear: bool = False):
-    """(kind, material_a, material_b, m*, R*, E*[, G*]) for the smallest particle of each pair of groups
-    and each group against each wall and each contact solid."""
+def _pairs(scene: Scene, with_shear: bool = False, with_smaller_radius: bool = False):
+    """(kind, material_a, material_b, m*, R*, E*[, G*][, smaller radius]) for the smallest particle of each pair
+    of groups and each group against each wall and each contact solid."""
+    for pair in _pairs_with_radius(scene, with_shear):
+        yield pair if with_smaller_radius else pair[:-1]
+
+
+def _pairs_with_radius(scene: Scene, with_shear: bool):
     smallest = []
     for group, count in zip(scene.particles, group_counts(scene)):
         material = scene.materials[group.material]
@@ -554,7 +565,8 @@ def _pairs(scene: Scene, with_shear: bool = False):
                 continue  # no such pair in the scene
             pair = ("particle_particle", name_a, name_b, m_a * m_b / (m_a + m_b), r_a * r_b / (r_a + r_b),
                     _effective_modulus(a, b))
-            yield pair + (_effective_shear_modulus(a, b),) if with_shear else pair
+            pair = pair + (_effective_shear_modulus(a, b),) if with_shear else pair
+            yield pair + (min(r_a, r_b),)
         if count_a == 0:
             continue
         # Solids' contact surfaces are walls to the particle (their mass is far larger).
@@ -570,10 +582,12 @@ def _pairs(scene: Scene, with_shear: bool = False):
             if any(wall is solid for solid in scene.solids) and scene.coupling.contact_modulus == "particle":
                 # The contact tables leave the solid's compliance out (its FE mesh deforms instead).
                 pair = ("particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, None))
-                yield pair + (_effective_shear_modulus(a, None),) if with_shear else pair
+                pair = pair + (_effective_shear_modulus(a, None),) if with_shear else pair
+                yield pair + (r_a,)
                 continue
             pair = ("particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, w))
-            yield pair + (_effective_shear_modulus(a, w),) if with_shear else pair
+            pair = pair + (_effective_shear_modulus(a, w),) if with_shear else pair
+            yield pair + (r_a,)
 
 
 def hertz_contact_duration(scene: Scene, speed: float) -> ContactDurations:
@@ -746,6 +760,19 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
             found.append(f"{label}: at {speed:.3g} m/s the peak overlap is {ratio:.2g} radii, so the sphere passes "
                          f"through the thin surface whatever the step (the run stops when it happens): use stiffer "
                          f"materials (youngs_modulus) or lower the impact speed")
+    thin = {wall.material for wall in scene.walls if wall.kind == "mesh"} | {
+        solid.material for solid in scene.solids if solid.contact}
+    for ratio, kind, label in contact_overlaps(scene, speed):
+        if ratio > 1.0 and kind == "particle_particle":
+            found.append(f"contacts {label}: at the impact speed {speed:.3g} m/s the peak overlap is {ratio:.2g} of "
+                         f"the smaller radius, so the spheres pass through each other (the run stops when it "
+                         f"happens): use stiffer materials (youngs_modulus, normal_stiffness) or lower the speed")
+        elif ratio > PEAK_OVERLAP_WARNING and not (kind == "particle_wall" and label.split(" on ")[1] in thin
+                                                    and ratio > 1.0):
+            found.append(f"contacts {label}: at the impact speed {speed:.3g} m/s the peak overlap is {ratio:.2g} of "
+                         f"the smaller radius (want <= {PEAK_OVERLAP_WARNING}): the contact law is a small-overlap "
+                         f"law, so forces and contact times are off; use stiffer materials (youngs_modulus, "
+                         f"normal_stiffness) or lower the speed")
     found.extend(start_inside_walls(scene))
     thermal = thermal_step_limit(scene)
     if thermal is not None and dt > thermal[0]:
@@ -890,6 +917,30 @@ def thin_surface_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str]]
     for kind, name_a, name_b, m_eff, r_eff, e_eff in _pairs(scene):
         if kind == "particle_wall" and name_b in thin:
             found.append((_peak_overlap(m_eff, r_eff, e_eff, speed) / r_eff, f"{name_a} on {name_b}"))
+    return found
+
+
+def pair_peak_overlap(interaction, m_eff: float, r_eff: float, e_eff: float, speed: float) -> float:
+    """Peak overlap of an undamped head-on impact at `speed` for the pair's normal model: Hertz's
+    (15 m* v^2 / (16 E* sqrt(R*)))^(2/5) (also the linear law without normal_stiffness, which is matched to
+    it, and the JKR law, Hertz's at the overlaps that matter here), or v sqrt(m*/k) for a linear spring k."""
+    if interaction.model == "linear_spring_dashpot" and interaction.normal_stiffness is not None:
+        return speed * math.sqrt(m_eff / interaction.normal_stiffness)
+    return _peak_overlap(m_eff, r_eff, e_eff, speed)
+
+
+def contact_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str, str]]:
+    """[(peak overlap / smaller radius, kind, label)] of an impact at `speed` for each pair of groups
+    (kind 'particle_particle') and each group on each wall or contact solid ('particle_wall').  The contact
+    laws are small-overlap laws; two spheres overlapping by more than the smaller radius can pass through
+    each other (their centres cross and the normal flips)."""
+    found = []
+    if speed <= 0.0 or not math.isfinite(speed):
+        return found
+    for kind, name_a, name_b, m_eff, r_eff, e_eff, smaller in _pairs(scene, with_smaller_radius=True):
+        overlap = pair_peak_overlap(scene.interaction(name_a, name_b), m_eff, r_eff, e_eff, speed)
+        joiner = "-" if kind == "particle_particle" else " on "
+        found.append((overlap / smaller, kind, f"{name_a}{joiner}{name_b}"))
     return found
 
 
