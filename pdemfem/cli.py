@@ -434,9 +434,18 @@ def _report(path, scene, base_dir, placed) -> tuple:
 
     rayleigh = derived.rayleigh_time(scene)
     dt = derived.time_step(scene, base_dir=base_dir)
+    from pdemfem.coupling.check import HELD_FORCE_MARGIN, build_solids, held_force_step_limit
+
+    solids = build_solids(scene, base_dir) if scene.solids else None
     if scene.time.dt == "auto":
         solid_step = dt if not scene.particles else None
-        lines.append(f"time step: dt = {dt:.3g} s (auto: {derived.time_step_choice(scene, solid_step)[1]})")
+        why = derived.time_step_choice(scene, solid_step)[1]
+        held_limit, held_by = held_force_step_limit(scene, solids) if solids else (math.inf, None)
+        if dt > HELD_FORCE_MARGIN * held_limit:  # as run does (Simulation): a yielding surface's node sets the step
+            dt = HELD_FORCE_MARGIN * held_limit
+            why = (f"{HELD_FORCE_MARGIN:g} x the {held_limit:.3g} s the contact force held on solid {held_by}'s "
+                   f"lightest surface node allows (S_n dt^2 / (4 m) <= 1); the particles' own limit was {why}")
+        lines.append(f"time step: dt = {dt:.3g} s (auto: {why})")
     else:
         rayleigh_text = f" = {dt / rayleigh:.3g} x Rayleigh time {rayleigh:.3g} s" if rayleigh else ""
         lines.append(f"time step: dt = {dt:.3g} s (given{rayleigh_text})")
@@ -472,7 +481,7 @@ def _report(path, scene, base_dir, placed) -> tuple:
     if scene.solids:
         from pdemfem.coupling.check import coupling_report
 
-        lines.extend(coupling_report(scene, base_dir, dt, warnings=found))
+        lines.extend(coupling_report(scene, base_dir, dt, warnings=found, solids=solids))
     return lines, found
 
 

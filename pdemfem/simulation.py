@@ -17,7 +17,7 @@ from mpi4py import MPI
 
 from pdemfem.clumps.bodies import ClumpBodies
 from pdemfem.contact.tables import build_contact_tables
-from pdemfem.coupling.check import blended_transfer, coupling_assessment
+from pdemfem.coupling.check import HELD_FORCE_MARGIN, blended_transfer, coupling_assessment
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
 from pdemfem.errors import SceneError, SolverError
@@ -65,6 +65,12 @@ class Simulation:
         # with coupling.transfer auto the solids a point load dimples get the blended gap.
         self.coupling_warnings, interval_limit, self.point_loaded_solids = (
             coupling_assessment(scene, self.solids, self.dt) if self.solids else ([], math.inf, set()))
+        if scene.time.dt == "auto" and self.dt > HELD_FORCE_MARGIN * interval_limit:
+            # dt auto keeps its promise on yielding solid surfaces too: within the step a held contact force
+            # allows their lightest node (an explicit time.dt above that is refused, below).
+            self.dt = HELD_FORCE_MARGIN * interval_limit
+            self.coupling_warnings, interval_limit, self.point_loaded_solids = coupling_assessment(
+                scene, self.solids, self.dt)
         self.particle_system = self._build_particles()
         for surface in self.coupled_surfaces:
             surface.particle_system = self.particle_system

@@ -16,7 +16,7 @@ lumped/consistent mass, restitution, friction, DEM dt up to the automatic step, 
 """
 import pytest
 
-from stability_cases import resting_scene, run_resting, verlet_energy_bound
+from stability_cases import LevelEnergy, resting_scene, run_resting, verlet_energy_bound
 
 CASES = {
     "P1-8-e0.2": dict(cells=8),
@@ -172,3 +172,51 @@ def test_run_lowers_fem_every_to_the_held_force_limit_and_refuses_a_longer_step(
     err = capsys.readouterr().err
     assert code == 2, err
     assert "time.dt" in err and "holds a contact force on a yielding solid surface" in err
+
+
+def test_dt_auto_takes_the_step_a_yielding_surface_allows(tmp_path):
+    """dt auto with the block 20,000 x softer (E = 1e6, 8 cells): the particles alone would take 6.8e-3 s,
+    above the 4.0e-3 s the held contact force allows the lightest surface node.  run refused that before
+    ("give time.dt <= ..."); now dt auto takes half the node's limit, check reports the same step and names
+    why, and the run is stable: the heavy sphere sinks into the soft block (it starts at the steel rest
+    overlap) and the mechanical energy at the particles' time level (LevelEnergy, the scheme's invariant)
+    only falls, up to velocity Verlet's error on the contact oscillation (the map's bound), and the
+    block's largest nodal speed decays."""
+    import numpy as np
+    import yaml
+
+    from pdemfem import Simulation
+    from pdemfem.cli import check_report
+    from pdemfem.coupling.check import HELD_FORCE_MARGIN, held_force_step_limit
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import load_scene
+
+    scene = resting_scene(8, end=0.4)
+    scene["materials"]["steel"]["youngs_modulus"] = 1e6
+    scene["time"]["dt"] = "auto"
+    particle_step = derived.time_step(load_scene(scene)[0])
+    sim = Simulation.from_dict(scene, output_dir=str(tmp_path / "run"))
+    limit, solid = held_force_step_limit(sim.scene, sim.solids)
+    assert solid == "block" and limit < particle_step and sim.dt == HELD_FORCE_MARGIN * limit, (
+        sim.dt, limit, particle_step)
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    lines, warnings = check_report(str(path))
+    assert f"time step: dt = {sim.dt:.3g} s (auto: 0.5 x the {limit:.3g} s the contact force held on solid block" in (
+        "\n".join(lines))
+    assert not [w for w in warnings if "overshoot" in w], warnings
+    bound = verlet_energy_bound(sim.dt)
+    block = sim.solids["block"]
+    assert sim.coupling.fem_substeps["block"] == 1  # LevelEnergy is the scheme's exact invariant only then
+    level = LevelEnergy(sim)
+    sim.step()
+    lowest = level.update()
+    speeds = []
+    for step in range(400):
+        sim.step()
+        energy = level.update()
+        assert energy <= lowest + bound, (step, energy - lowest, bound)
+        lowest = min(lowest, energy)
+        if step % 100 == 99:
+            speeds.append(float(np.abs(block.velocities).max()))
+    assert speeds[-1] < speeds[0], speeds

@@ -9,6 +9,9 @@ import numpy as np
 # Above this, the contact's held elastic force could overshoot an unsupported surface node within one
 # interval (central difference of the contact spring on the node's mass: S_n h^2 / m <= 4).
 HELD_FORCE_LIMIT = 1.0
+# dt auto on a yielding surface takes this fraction of the interval HELD_FORCE_LIMIT allows (the margin dt auto
+# keeps to the dashpot's stability limit too): at the limit itself the surface node is marginally stable.
+HELD_FORCE_MARGIN = 0.5
 # Above this, one contact displaces the surface as much as the solid resists it (S_n vs E l): the surface
 # then follows the contact force within the interval and the held force lags it.
 SURFACE_COMPLIANCE_LIMIT = 0.1
@@ -19,24 +22,45 @@ SURFACE_COMPLIANCE_LIMIT = 0.1
 POINT_LOAD_LIMIT = 0.5
 
 
-def coupling_report(scene, base_dir, dt: float, comm=None, warnings=None) -> list:
-    """Lines naming, per solid, the FE critical step, how the coupling covers a DEM step and the contact's
-    stiffness and damping against the surface nodes; appends stability warnings to `warnings`.
-
-    Builds each solid (mesh, operators; no static solve): collective on `comm` (default COMM_SELF)."""
-    if not scene.solids:
-        return []
+def build_solids(scene, base_dir, comm=None) -> dict:
+    """The scene's solids by name (mesh, operators; no static solve): collective on `comm` (default COMM_SELF)."""
     from mpi4py import MPI
 
     from pdemfem.fem.solid import Solid
 
     comm = comm if comm is not None else MPI.COMM_SELF
+    return {config.name: Solid(config, scene.materials[config.material], gravity=scene.gravity, comm=comm,
+                               base_dir=base_dir) for config in scene.solids}
+
+
+def held_force_step_limit(scene, solids: dict) -> tuple:
+    """(the longest interval fem_every x dt the held contact force allows over all yielding solid surfaces [s],
+    the solid that sets it); (inf, None) when no surface yields to its contacts.  dt auto takes
+    HELD_FORCE_MARGIN of it."""
+    limits = {}
+    for config in scene.solids:
+        if config.contact and scene.particles:
+            _contact_figures(scene, config, solids[config.name], 1.0, None, limits)
+    if not limits:
+        return math.inf, None
+    name = min(limits, key=limits.get)
+    return limits[name], name
+
+
+def coupling_report(scene, base_dir, dt: float, comm=None, warnings=None, solids=None) -> list:
+    """Lines naming, per solid, the FE critical step, how the coupling covers a DEM step and the contact's
+    stiffness and damping against the surface nodes; appends stability warnings to `warnings`.
+
+    Builds each solid unless `solids` (build_solids) are given: collective on `comm` (default COMM_SELF)."""
+    if not scene.solids:
+        return []
+    solids = solids if solids is not None else build_solids(scene, base_dir, comm)
     k = scene.coupling.fem_every
     interval = k * dt
     lines = [f"coupling: DEM dt = {dt:.3g} s; fem_every = {k}: the solids advance every {k} DEM step(s) "
              f"over {interval:.3g} s with the mean contact load"]
     for config in scene.solids:
-        solid = Solid(config, scene.materials[config.material], gravity=scene.gravity, comm=comm, base_dir=base_dir)
+        solid = solids[config.name]
         critical = solid.critical_time_step()
         substeps = max(1, math.ceil(interval / critical * (1.0 - 1e-12)))
         lines.append(f"solid {config.name}: {3 * solid.n_global_nodes} DOF ({config.element}, {config.mass} mass), "
