@@ -11,11 +11,14 @@ A member's row carries its mass share (pdemfem.clumps.template) as its mass and 
 its inertia, which the contact laws read; the sphere integrator skips members.  One step
 (ParticleSystem.step with clumps):
 
-    first_half    free spheres: half kick, drift; bodies: kick_bodies(dt/2), drift_bodies(dt),
-                  omega from L; member rows <- member_states (position, velocity, spin)
+    first_half    free spheres: half kick and drift (kick_drift_free_spheres, which zeroes every owned
+                  row's loads, as kick_drift does); bodies: half kick, drift, R(q), omega from L
+                  (kick_drift_bodies); member rows <- place_members (position, velocity, spin; the
+                  lever R(q) offset kept per member)
     (list rebuild or ghost update; every contact force on the rows)
-    sum_loads     body F, T <- sum_member_loads of the owned members (after the contacts)
-    second_half   free spheres: half kick; bodies: kick_bodies(dt/2), omega; member velocities
+    sum_loads     body F, T <- sum_row_loads of the owned members' rows (after the contacts)
+    second_half   free spheres: half kick; bodies: half kick and omega (kick_bodies_and_spin, with the
+                  R of the first half); member velocities and spins (move_members)
 
 The kick formulas are those of pdemfem.particles.integrate, so a clump of one sphere follows the
 sphere's translation bit for bit (its rotation goes through L = I omega: equal to round-off).
