@@ -51,8 +51,8 @@ def one_sphere_scenes(velocities, spins, interaction):
 
 
 def test_one_sphere_clump_falls_as_the_sphere_bit_for_bit(tmp_path):
-    """Translation only (a vertical drop onto the floor, no torque): kick_bodies, drift_bodies and
-    member_states do the sphere integrator's arithmetic on the same numbers (the offset is 0, the
+    """Translation only (a vertical drop onto the floor, no torque): kick_drift_bodies, place_members
+    and kick_bodies_and_spin do the sphere integrator's arithmetic on the same numbers (the offset is 0, the
     mass the same), so every bit agrees, through the bounce."""
     sphere_scene, clump_scene = one_sphere_scenes([[0.0, 0.0, -0.1]], [[0.0, 0.0, 0.0]],
                                                   {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.5})

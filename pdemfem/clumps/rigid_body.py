@@ -286,7 +286,8 @@ def member_levers(member_count, member_body, member_offsets, rotations, levers):
     for m in range(member_count):
         b = member_body[m]
         for axis in range(3):
-            levers[m, axis] = (rotations[b, axis, 0] * member_offsets[m, 0] + rotations[b, axis, 1] * member_offsets[m, 1]
+            levers[m, axis] = (rotations[b, axis, 0] * member_offsets[m, 0]
+                               + rotations[b, axis, 1] * member_offsets[m, 1]
                                + rotations[b, axis, 2] * member_offsets[m, 2])
 
 
