@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from pdemfem.clumps.quaternion import quaternion_from_axis_angle, rotation_matrices
-from pdemfem.clumps.rigid_body import (angular_momenta_from_velocities, angular_velocities_from_momenta,
-                                       drift_bodies, kick_bodies, member_states, rotational_energies,
-                                       sum_member_loads)
+from pdemfem.clumps.rigid_body import (SMALL_HALF_ANGLE, _half_angle_cosine_sine, angular_momenta_from_velocities,
+                                       angular_velocities_from_momenta, drift_bodies, kick_bodies, member_states,
+                                       rotational_energies, sum_member_loads)
 
 EPS = np.finfo(float).eps
 NO_GRAVITY = np.zeros(3)
@@ -198,6 +198,33 @@ def test_constant_torque_about_principal_axis_from_rest():
     # direction: bound 4 steps eps |omega|.  Using the wrong moment or dropping a half kick fails by > 1e-1.
     assert np.abs(omega[0] - expected).max() <= 4 * steps * EPS * np.linalg.norm(expected)
     assert np.abs(rotation_matrices(q)[0][:, 2] - axis).max() <= 4 * steps * EPS
+
+
+def test_half_angle_polynomials_are_the_cosine_and_sine_to_round_off():
+    """Up to SMALL_HALF_ANGLE the drift takes a sub-rotation's cos and sin of the half angle from
+    Taylor polynomials.  The terms they leave out are below 1e-19 there, so they differ from the
+    library's (correctly rounded to within an ulp) by the rounding of a few operations: asserted 2 ulp
+    of 1 for the cosine and 2 ulp of the sine's value (cutting one more term misses by 1e-14)."""
+    for a in np.linspace(-SMALL_HALF_ANGLE, SMALL_HALF_ANGLE, 4001):
+        cosine, sine = _half_angle_cosine_sine(a, True)
+        assert abs(cosine - math.cos(a)) <= 2 * EPS
+        assert abs(sine - math.sin(a)) <= 2 * np.spacing(abs(math.sin(a))) + 1e-300
+
+
+@pytest.mark.parametrize("turn", [0.01, 1.0])
+def test_spin_about_a_principal_axis_turns_by_the_exact_angle(turn):
+    """A free spin omega about principal axis 3 is a rotation by omega dt per drift, exactly (the
+    other two sub-rotations have pi_k = 0): q = (cos(omega dt/2), 0, 0, sin(omega dt/2)) from the
+    identity, to the rounding of q's update and renormalisation (4 eps).  turn = omega dt 0.01 is
+    drifted with the polynomials, 1.0 (half angles beyond SMALL_HALF_ANGLE) with math.cos/sin: the
+    polynomials there would be off by 5e-9."""
+    omega, dt = 3.0, turn / 3.0
+    x, v, q, momenta, moments_array = _body((0.3, 0.7, 1.1), [0.0, 0.0, omega])
+    momenta_before = momenta.copy()
+    drift_bodies(1, x, v, q, momenta, moments_array, dt)
+    expected = [math.cos(0.5 * turn), 0.0, 0.0, math.sin(0.5 * turn)]
+    assert np.abs(q[0] - expected).max() <= 4 * EPS
+    assert np.array_equal(momenta, momenta_before)  # the free flow leaves L alone
 
 
 def test_member_states_and_loads_are_rigid_body_kinematics():

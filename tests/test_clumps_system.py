@@ -51,8 +51,8 @@ def one_sphere_scenes(velocities, spins, interaction):
 
 
 def test_one_sphere_clump_falls_as_the_sphere_bit_for_bit(tmp_path):
-    """Translation only (a vertical drop onto the floor, no torque): kick_bodies, drift_bodies and
-    member_states do the sphere integrator's arithmetic on the same numbers (the offset is 0, the
+    """Translation only (a vertical drop onto the floor, no torque): kick_drift_bodies, place_members
+    and kick_bodies_and_spin do the sphere integrator's arithmetic on the same numbers (the offset is 0, the
     mass the same), so every bit agrees, through the bounce."""
     sphere_scene, clump_scene = one_sphere_scenes([[0.0, 0.0, -0.1]], [[0.0, 0.0, 0.0]],
                                                   {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.5})
@@ -76,7 +76,7 @@ def test_one_sphere_clump_with_friction_spin_and_a_neighbour_matches_the_sphere_
     """Oblique impacts with friction, rolling resistance and spin: the sphere updates omega += dt/2 T/I,
     the body L += dt/2 T and omega = R diag(1/I) R^T L, which rounds differently (a few eps per step).
     Contacts are dissipative here and carry such differences without growth, so over N steps they stay
-    below N eps of each quantity's scale; 4000 steps: 9e-13.  Measured 1.7e-15 (positions)."""
+    below N eps of each quantity's scale; 4000 steps: 9e-13.  Measured 6e-16 (positions)."""
     interaction = {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.5, "rolling_friction": 0.1}
     sphere_scene, clump_scene = one_sphere_scenes([[0.05, 0.02, -0.1], [0.0, 0.0, 0.0]],
                                                   [[10.0, -20.0, 30.0], [0.0, 0.0, 0.0]], interaction)

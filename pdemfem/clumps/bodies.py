@@ -11,11 +11,14 @@ A member's row carries its mass share (pdemfem.clumps.template) as its mass and 
 its inertia, which the contact laws read; the sphere integrator skips members.  One step
 (ParticleSystem.step with clumps):
 
-    first_half    free spheres: half kick, drift; bodies: kick_bodies(dt/2), drift_bodies(dt),
-                  omega from L; member rows <- member_states (position, velocity, spin)
+    first_half    free spheres: half kick and drift (kick_drift_free_spheres, which zeroes every owned
+                  row's loads, as kick_drift does); bodies: half kick, drift, R(q), omega from L
+                  (kick_drift_bodies); member rows <- place_members (position, velocity, spin; the
+                  lever R(q) offset kept per member)
     (list rebuild or ghost update; every contact force on the rows)
-    sum_loads     body F, T <- sum_member_loads of the owned members (after the contacts)
-    second_half   free spheres: half kick; bodies: kick_bodies(dt/2), omega; member velocities
+    sum_loads     body F, T <- sum_row_loads of the owned members' rows (after the contacts)
+    second_half   free spheres: half kick; bodies: half kick and omega (kick_bodies_and_spin, with the
+                  R of the first half); member velocities and spins (move_members)
 
 The kick formulas are those of pdemfem.particles.integrate, so a clump of one sphere follows the
 sphere's translation bit for bit (its rotation goes through L = I omega: equal to round-off).
@@ -37,13 +40,40 @@ from numba import njit
 from pdemfem import state_dict as kinds
 from pdemfem.clumps.quaternion import quaternion_conjugates, quaternion_products
 from pdemfem.clumps.rigid_body import (angular_momenta_from_velocities, angular_velocities_from_momenta,
-                                       drift_bodies, kick_bodies, member_states, rotational_energies,
-                                       sum_member_loads)
+                                       body_rotations, kick_bodies_and_spin, kick_drift_bodies, member_levers,
+                                       move_members, place_members, rotational_energies, sum_row_loads)
 from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.integrate import keep_largest
 
 BODY_FIELD = "clump_body"
 OFFSET_FIELD = "clump_offset"
+
+
+@njit(cache=True)
+def kick_drift_free_spheres(owned_count, body, positions, velocities, angular_velocities, forces, torques,
+                            inverse_mass, inverse_inertia, gravity, half_dt, dt, positions_at_build):
+    """pdemfem.particles.integrate.kick_drift over the rows that are not clump members (the same arithmetic,
+    the same largest squared displacement); every owned row's loads are zeroed for the next force
+    evaluation (the members' were summed onto their bodies already)."""
+    largest = 0.0
+    for i in range(owned_count):
+        if body[i] >= 0:
+            for axis in range(3):
+                forces[i, axis] = 0.0
+                torques[i, axis] = 0.0
+            continue
+        displacement_squared = 0.0
+        for axis in range(3):
+            velocity = velocities[i, axis] + half_dt * (forces[i, axis] * inverse_mass[i] + gravity[axis])
+            velocities[i, axis] = velocity
+            angular_velocities[i, axis] += half_dt * torques[i, axis] * inverse_inertia[i]
+            forces[i, axis] = 0.0
+            torques[i, axis] = 0.0
+            positions[i, axis] += dt * velocity
+            offset = positions[i, axis] - positions_at_build[i, axis]
+            displacement_squared += offset * offset
+        largest = keep_largest(largest, displacement_squared)
+    return largest
 
 
 @njit(cache=True)
@@ -56,49 +86,6 @@ def kick_free_spheres(owned_count, body, velocities, angular_velocities, forces,
         for axis in range(3):
             velocities[i, axis] += half_dt * (forces[i, axis] * inverse_mass[i] + gravity[axis])
             angular_velocities[i, axis] += half_dt * torques[i, axis] * inverse_inertia[i]
-
-
-@njit(cache=True)
-def drift_free_spheres(owned_count, body, positions, velocities, dt, positions_at_build):
-    """pdemfem.particles.integrate.drift over the rows that are not clump members (inf on a non-finite one)."""
-    largest = 0.0
-    for i in range(owned_count):
-        if body[i] >= 0:
-            continue
-        displacement_squared = 0.0
-        for axis in range(3):
-            positions[i, axis] += dt * velocities[i, axis]
-            offset = positions[i, axis] - positions_at_build[i, axis]
-            displacement_squared += offset * offset
-        largest = keep_largest(largest, displacement_squared)
-    return largest
-
-
-@njit(cache=True)
-def scatter_members(rows, member_positions, member_velocities, member_spins, positions, velocities,
-                    angular_velocities, positions_at_build):
-    """Write the members' state into their rows; returns the largest squared displacement since the
-    list build (inf when one is not finite)."""
-    largest = 0.0
-    for k in range(rows.shape[0]):
-        i = rows[k]
-        displacement_squared = 0.0
-        for axis in range(3):
-            positions[i, axis] = member_positions[k, axis]
-            velocities[i, axis] = member_velocities[k, axis]
-            angular_velocities[i, axis] = member_spins[k, axis]
-            offset = positions[i, axis] - positions_at_build[i, axis]
-            displacement_squared += offset * offset
-        largest = keep_largest(largest, displacement_squared)
-    return largest
-
-
-@njit(cache=True)
-def gather_member_loads(rows, forces, torques, member_forces, member_torques):
-    for k in range(rows.shape[0]):
-        for axis in range(3):
-            member_forces[k, axis] = forces[rows[k], axis]
-            member_torques[k, axis] = torques[rows[k], axis]
 
 
 class ClumpBodies(kinds.StateComponent):
@@ -138,7 +125,12 @@ class ClumpBodies(kinds.StateComponent):
                    [t.principal_orientation for t in templates])
 
     def _derive(self):
+        """The arrays that follow from the stored ones (after every reorder, removal or load)."""
         self.inverse_masses = 1.0 / self.masses
+        # R(q) of every body: set by each step's drift, read by the members' placement, the load sum
+        # and the second half's omega.
+        self.rotations = np.empty((self.count, 3, 3))
+        body_rotations(self.count, self.orientations, self.rotations)
         self.angular_velocities = np.zeros((self.count, 3))
         angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
                                         self.angular_velocities)
@@ -223,53 +215,40 @@ class ClumpBodies(kinds.StateComponent):
         self.member_rows = np.flatnonzero(body >= 0).astype(np.int64)
         self.member_body = self.local_index(body[self.member_rows])
         self.member_offsets = np.ascontiguousarray(state.fields[OFFSET_FIELD][self.member_rows])
-        count = len(self.member_rows)
-        self._member_positions = np.zeros((count, 3))
-        self._member_velocities = np.zeros((count, 3))
-        self._member_spins = np.zeros((count, 3))
-        self._member_forces = np.zeros((count, 3))
-        self._member_torques = np.zeros((count, 3))
-
-    def _place_members(self, state) -> float:
-        member_states(len(self.member_rows), self.member_body, self.member_offsets, self.positions, self.velocities,
-                      self.orientations, self.angular_velocities, self._member_positions, self._member_velocities,
-                      self._member_spins)
-        return scatter_members(self.member_rows, self._member_positions, self._member_velocities, self._member_spins,
-                               state.positions, state.velocities, state.angular_velocities, state.positions_at_build)
+        # Levers R(q) offset: the load sum reads them before the next step places the members.
+        self.member_levers = np.empty((len(self.member_rows), 3))
+        member_levers(len(self.member_rows), self.member_body, self.member_offsets, self.rotations, self.member_levers)
 
     # ------------------------------------------------------------------ the step
     def first_half(self, state, gravity, dt) -> float:
-        """Half kick and drift of the free spheres and the bodies; members follow their bodies.
-        Returns the largest squared displacement of a row since the list build."""
-        owned = state.owned_count
-        body = state.fields[BODY_FIELD]
-        kick_free_spheres(owned, body, state.velocities, state.angular_velocities, state.forces, state.torques,
-                          state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt)
-        kick_bodies(self.count, self.velocities, self.angular_momenta, self.forces, self.torques, self.inverse_masses,
-                    gravity, 0.5 * dt)
-        largest = drift_free_spheres(owned, body, state.positions, state.velocities, dt, state.positions_at_build)
-        drift_bodies(self.count, self.positions, self.velocities, self.orientations, self.angular_momenta,
-                     self.principal_moments, dt)
-        angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
-                                        self.angular_velocities)
-        return max(largest, self._place_members(state))
+        """Half kick and drift of the free spheres and the bodies (zeroing the owned rows' loads, as
+        kick_drift does); members follow their bodies.  Returns the largest squared displacement of a
+        row since the list build."""
+        largest = kick_drift_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.positions,
+                                          state.velocities, state.angular_velocities, state.forces, state.torques,
+                                          state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt, dt,
+                                          state.positions_at_build)
+        kick_drift_bodies(self.count, self.positions, self.velocities, self.orientations, self.angular_momenta,
+                          self.forces, self.torques, self.inverse_masses, self.principal_moments, gravity, 0.5 * dt,
+                          dt, self.rotations, self.angular_velocities)
+        members = place_members(self.member_rows, self.member_body, self.member_offsets, self.rotations,
+                                self.positions, self.velocities, self.angular_velocities, self.member_levers,
+                                state.positions, state.velocities, state.angular_velocities, state.positions_at_build)
+        return max(largest, members)
 
     def sum_loads(self, state) -> None:
         """Body force and torque about the centre of mass from the owned members' contact loads."""
-        gather_member_loads(self.member_rows, state.forces, state.torques, self._member_forces, self._member_torques)
-        self.forces[:] = 0.0
-        self.torques[:] = 0.0
-        sum_member_loads(len(self.member_rows), self.member_body, self.member_offsets, self.orientations,
-                         self._member_forces, self._member_torques, self.forces, self.torques)
+        sum_row_loads(self.member_rows, self.member_body, self.member_levers, state.forces, state.torques,
+                      self.forces, self.torques)
 
     def second_half(self, state, gravity, dt) -> None:
         kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities, state.angular_velocities,
                           state.forces, state.torques, state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt)
-        kick_bodies(self.count, self.velocities, self.angular_momenta, self.forces, self.torques, self.inverse_masses,
-                    gravity, 0.5 * dt)
-        angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
-                                        self.angular_velocities)
-        self._place_members(state)
+        kick_bodies_and_spin(self.count, self.velocities, self.angular_momenta, self.forces, self.torques,
+                             self.inverse_masses, gravity, 0.5 * dt, self.rotations, self.principal_moments,
+                             self.angular_velocities)
+        move_members(self.member_rows, self.member_body, self.member_levers, self.velocities,
+                     self.angular_velocities, state.velocities, state.angular_velocities)
 
     # ------------------------------------------------------------------ energies
     def energy_sums(self, state, gravity):

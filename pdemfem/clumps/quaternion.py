@@ -11,18 +11,19 @@ import numpy as np
 from numba import njit
 
 
+@njit(inline="always", cache=True)
+def rotation_entries(w, x, y, z):
+    """R(q) of a unit quaternion as nine scalars, row by row (r00, r01, r02, r10, ..., r22)."""
+    return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+            2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
+            2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
+
+
 @njit(cache=True)
 def rotation_matrix(w, x, y, z, out):
     """Fill out (3, 3) with R(q) of a unit quaternion."""
-    out[0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    out[0, 1] = 2.0 * (x * y - w * z)
-    out[0, 2] = 2.0 * (x * z + w * y)
-    out[1, 0] = 2.0 * (x * y + w * z)
-    out[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    out[1, 2] = 2.0 * (y * z - w * x)
-    out[2, 0] = 2.0 * (x * z - w * y)
-    out[2, 1] = 2.0 * (y * z + w * x)
-    out[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    (out[0, 0], out[0, 1], out[0, 2], out[1, 0], out[1, 1], out[1, 2], out[2, 0], out[2, 1],
+     out[2, 2]) = rotation_entries(w, x, y, z)
 
 
 def rotation_matrices(orientations):

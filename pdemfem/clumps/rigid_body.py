@@ -46,7 +46,8 @@ import math
 import numpy as np
 from numba import njit
 
-from pdemfem.clumps.quaternion import rotation_matrix
+from pdemfem.clumps.quaternion import rotation_entries, rotation_matrix
+from pdemfem.particles.integrate import keep_largest
 
 
 @njit(cache=True)
@@ -58,41 +59,104 @@ def kick_bodies(count, velocities, angular_momenta, forces, torques, inverse_mas
             angular_momenta[i, axis] += half_dt * torques[i, axis]
 
 
-@njit(cache=True)
-def _rotate_about_principal_axis(q, body_momentum, axis, principal_moments, i, h):
-    """Exact flow of pi_k^2/(2 I_k) for a time h: turn q and pi about body axis k = `axis`."""
-    angle = h * body_momentum[axis] / principal_moments[i, axis]
-    c = math.cos(0.5 * angle)
-    s = math.sin(0.5 * angle)
-    # q <- q (x) (c, s e_k): (a1, v1)(a2, v2) = (a1 a2 - v1.v2, a1 v2 + a2 v1 + v1 x v2).
-    w, x, y, z = q[0], q[1], q[2], q[3]
+# Below this |half angle| the Taylor polynomials of _half_angle_cosine_sine are the cosine and sine to
+# round-off: the first omitted terms, a^9/9! and a^8/8!, are below 2.5e-22 and 1e-19 there, under a
+# thousandth of an ulp of sin a (>= a/2) and of cos a (~1).  A sub-rotation's angle is then at most
+# 1/32 rad, a step's turn of a grain at most 1/16 rad; DEM grains turn far less (omega dt ~ 1e-3),
+# larger angles take math.cos and math.sin.
+SMALL_HALF_ANGLE = 1.0 / 64.0
+
+
+@njit(inline="always", cache=True)
+def _half_angle_cosine_sine(half_angle, polynomial):
+    """(cos a, sin a) of a = half_angle: with `polynomial` (|a| <= SMALL_HALF_ANGLE) the Horner
+    polynomials (no library call: ten sine and cosine calls per body per step were a third of the
+    drift's cost), else math.cos and math.sin."""
+    if polynomial:
+        a2 = half_angle * half_angle
+        sine = half_angle + half_angle * a2 * (-1.0 / 6.0 + a2 * (1.0 / 120.0 + a2 * (-1.0 / 5040.0)))
+        cosine = 1.0 + a2 * (-0.5 + a2 * (1.0 / 24.0 + a2 * (-1.0 / 720.0)))
+        return cosine, sine
+    return math.cos(half_angle), math.sin(half_angle)
+
+
+@njit(inline="always", cache=True)
+def _principal_rotation(w, x, y, z, p0, p1, p2, axis, factor, polynomial):
+    """Exact flow of pi_k^2/(2 I_k) for a time h: q and pi = (p0, p1, p2) turned about body axis
+    k = `axis` (a constant where inlined, so the branches fold away) by the angle h pi_k / I_k =
+    2 factor pi_k (factor = h / (2 I_k)); returns the turned values."""
     if axis == 0:
-        q[0] = w * c - x * s
-        q[1] = x * c + w * s
-        q[2] = y * c + z * s
-        q[3] = z * c - y * s
+        momentum = p0
     elif axis == 1:
-        q[0] = w * c - y * s
-        q[1] = x * c - z * s
-        q[2] = y * c + w * s
-        q[3] = z * c + x * s
+        momentum = p1
     else:
-        q[0] = w * c - z * s
-        q[1] = x * c + y * s
-        q[2] = y * c - x * s
-        q[3] = z * c + w * s
-    # Body frame: d pi/dt = pi x omega with omega = (pi_k / I_k) e_k turns (pi_i, pi_j) by -angle.
-    first = (axis + 1) % 3
-    second = (axis + 2) % 3
-    # The double-angle identities from the half angle's: two trig calls instead of four (the drift is the
-    # clump step's largest single cost); 1 - 2 s^2 keeps cos accurate for small angles.
+        momentum = p2
+    c, s = _half_angle_cosine_sine(factor * momentum, polynomial)
+    # The full angle's cosine and sine from the half angle's (double-angle identities); 1 - 2 s^2 keeps
+    # cos accurate for small angles.
     cos_angle = 1.0 - 2.0 * s * s
     sin_angle = 2.0 * s * c
-    a = body_momentum[first]
-    b = body_momentum[second]
-    body_momentum[first] = cos_angle * a + sin_angle * b
-    body_momentum[second] = -sin_angle * a + cos_angle * b
+    # q <- q (x) (c, s e_k): (a1, v1)(a2, v2) = (a1 a2 - v1.v2, a1 v2 + a2 v1 + v1 x v2).
+    # Body frame: d pi/dt = pi x omega with omega = (pi_k / I_k) e_k turns (pi_i, pi_j) by -angle,
+    # i = k + 1, j = k + 2 (mod 3).
+    if axis == 0:
+        return (w * c - x * s, x * c + w * s, y * c + z * s, z * c - y * s,
+                p0, cos_angle * p1 + sin_angle * p2, -sin_angle * p1 + cos_angle * p2)
+    if axis == 1:
+        return (w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s,
+                -sin_angle * p2 + cos_angle * p0, p1, cos_angle * p2 + sin_angle * p0)
+    return (w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s,
+            cos_angle * p0 + sin_angle * p1, -sin_angle * p0 + cos_angle * p1, p2)
 
+
+@njit(inline="always", cache=True)
+def _splitting(w, x, y, z, p0, p1, p2, factor0, factor1, factor2, polynomial):
+    """R_1(dt/2) R_2(dt/2) R_3(dt) R_2(dt/2) R_1(dt/2) of q and pi (factor_k: the half angle per unit
+    pi_k of the sub-rotation about k: dt/(4 I_k) for k = 1, 2, dt/(2 I_3)); returns q renormalised."""
+    w, x, y, z, p0, p1, p2 = _principal_rotation(w, x, y, z, p0, p1, p2, 0, factor0, polynomial)
+    w, x, y, z, p0, p1, p2 = _principal_rotation(w, x, y, z, p0, p1, p2, 1, factor1, polynomial)
+    w, x, y, z, p0, p1, p2 = _principal_rotation(w, x, y, z, p0, p1, p2, 2, factor2, polynomial)
+    w, x, y, z, p0, p1, p2 = _principal_rotation(w, x, y, z, p0, p1, p2, 1, factor1, polynomial)
+    w, x, y, z, p0, p1, p2 = _principal_rotation(w, x, y, z, p0, p1, p2, 0, factor0, polynomial)
+    # Each factor is a unit quaternion; renormalising stops the norm's round-off random walk.
+    scale = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    return w * scale, x * scale, y * scale, z * scale
+
+
+@njit(inline="always", cache=True)
+def _free_rotation(w, x, y, z, l0, l1, l2, moment0, moment1, moment2, dt):
+    """The orientation q = (w, x, y, z) after the free rotation for dt (the splitting of the module
+    docstring), renormalised.  L (world) is left unchanged: the free flow conserves it exactly.
+
+    The five half angles are bounded by factor_k |pi| = factor_k |L|: when that bound is within
+    SMALL_HALF_ANGLE (nearly always) the splitting runs with the polynomials, as one branch-free
+    stretch of arithmetic (the angle factors' divisions off its chain of dependent operations)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_entries(w, x, y, z)
+    p0 = r00 * l0 + r10 * l1 + r20 * l2  # pi = R(q)^T L
+    p1 = r01 * l0 + r11 * l1 + r21 * l2
+    p2 = r02 * l0 + r12 * l1 + r22 * l2
+    quarter = 0.25 * dt
+    factor0 = quarter / moment0
+    factor1 = quarter / moment1
+    factor2 = (0.5 * dt) / moment2
+    factor = max(factor0, factor1, factor2)
+    if factor * factor * (l0 * l0 + l1 * l1 + l2 * l2) <= SMALL_HALF_ANGLE * SMALL_HALF_ANGLE:
+        return _splitting(w, x, y, z, p0, p1, p2, factor0, factor1, factor2, True)
+    # (also a non-finite L: the math functions carry its NaN on)
+    return _splitting(w, x, y, z, p0, p1, p2, factor0, factor1, factor2, False)
+
+
+@njit(inline="always", cache=True)
+def _spin(r00, r01, r02, r10, r11, r12, r20, r21, r22, l0, l1, l2, moment0, moment1, moment2):
+    """omega (world) = R diag(1/I) R^T L."""
+    b0 = (r00 * l0 + r10 * l1 + r20 * l2) / moment0
+    b1 = (r01 * l0 + r11 * l1 + r21 * l2) / moment1
+    b2 = (r02 * l0 + r12 * l1 + r22 * l2) / moment2
+    return (r00 * b0 + r01 * b1 + r02 * b2, r10 * b0 + r11 * b1 + r12 * b2, r20 * b0 + r21 * b1 + r22 * b2)
+
+
+# The kernels below pass scalars (not array rows) to their inlined helpers: a helper taking arrays
+# costs reference-count updates per call, which made the drift and omega several times slower.
 
 @njit(cache=True)
 def drift_bodies(count, positions, velocities, orientations, angular_momenta, principal_moments, dt):
@@ -100,43 +164,84 @@ def drift_bodies(count, positions, velocities, orientations, angular_momenta, pr
 
     L (world) is left unchanged: the free flow conserves it exactly.
     """
-    rotation = np.empty((3, 3))
-    body_momentum = np.empty(3)
-    q = np.empty(4)
-    half = 0.5 * dt
     for i in range(count):
         for axis in range(3):
             positions[i, axis] += dt * velocities[i, axis]
-        for k in range(4):
-            q[k] = orientations[i, k]
-        rotation_matrix(q[0], q[1], q[2], q[3], rotation)
-        for row in range(3):  # pi = R^T L
-            body_momentum[row] = (rotation[0, row] * angular_momenta[i, 0] + rotation[1, row] * angular_momenta[i, 1]
-                                  + rotation[2, row] * angular_momenta[i, 2])
-        _rotate_about_principal_axis(q, body_momentum, 0, principal_moments, i, half)
-        _rotate_about_principal_axis(q, body_momentum, 1, principal_moments, i, half)
-        _rotate_about_principal_axis(q, body_momentum, 2, principal_moments, i, dt)
-        _rotate_about_principal_axis(q, body_momentum, 1, principal_moments, i, half)
-        _rotate_about_principal_axis(q, body_momentum, 0, principal_moments, i, half)
-        # Each factor is a unit quaternion; renormalising stops the norm's round-off random walk.
-        norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-        for k in range(4):
-            orientations[i, k] = q[k] / norm
+        (orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3]) = _free_rotation(
+            orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3], angular_momenta[i, 0],
+            angular_momenta[i, 1], angular_momenta[i, 2], principal_moments[i, 0], principal_moments[i, 1],
+            principal_moments[i, 2], dt)
+
+
+@njit(cache=True)
+def kick_drift_bodies(count, positions, velocities, orientations, angular_momenta, forces, torques, inverse_masses,
+                      principal_moments, gravity, half_dt, dt, rotations, angular_velocities):
+    """The step's first half over the bodies: kick_bodies(dt/2) and drift_bodies(dt) (the same arithmetic)
+    in one pass, then rotations[i] = R(q) of the new orientation and omega from L in a second.  (One
+    body's drift is a long chain of dependent operations; appending R and omega to it lengthened the
+    chain past what the processor overlaps between bodies: two passes are faster than one.)"""
+    for i in range(count):
+        for axis in range(3):
+            velocity = velocities[i, axis] + half_dt * (forces[i, axis] * inverse_masses[i] + gravity[axis])
+            velocities[i, axis] = velocity
+            angular_momenta[i, axis] += half_dt * torques[i, axis]
+            positions[i, axis] += dt * velocity
+        (orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3]) = _free_rotation(
+            orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3], angular_momenta[i, 0],
+            angular_momenta[i, 1], angular_momenta[i, 2], principal_moments[i, 0], principal_moments[i, 1],
+            principal_moments[i, 2], dt)
+    for i in range(count):
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_entries(
+            orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3])
+        rotations[i, 0, 0] = r00
+        rotations[i, 0, 1] = r01
+        rotations[i, 0, 2] = r02
+        rotations[i, 1, 0] = r10
+        rotations[i, 1, 1] = r11
+        rotations[i, 1, 2] = r12
+        rotations[i, 2, 0] = r20
+        rotations[i, 2, 1] = r21
+        rotations[i, 2, 2] = r22
+        (angular_velocities[i, 0], angular_velocities[i, 1], angular_velocities[i, 2]) = _spin(
+            r00, r01, r02, r10, r11, r12, r20, r21, r22, angular_momenta[i, 0], angular_momenta[i, 1],
+            angular_momenta[i, 2], principal_moments[i, 0], principal_moments[i, 1], principal_moments[i, 2])
+
+
+@njit(cache=True)
+def kick_bodies_and_spin(count, velocities, angular_momenta, forces, torques, inverse_masses, gravity, half_dt,
+                         rotations, principal_moments, angular_velocities):
+    """The step's second half over the bodies: kick_bodies(dt/2), then omega from L (R = rotations, set
+    by this step's drift: the orientation has not changed since)."""
+    for i in range(count):
+        for axis in range(3):
+            velocities[i, axis] += half_dt * (forces[i, axis] * inverse_masses[i] + gravity[axis])
+            angular_momenta[i, axis] += half_dt * torques[i, axis]
+        (angular_velocities[i, 0], angular_velocities[i, 1], angular_velocities[i, 2]) = _spin(
+            rotations[i, 0, 0], rotations[i, 0, 1], rotations[i, 0, 2], rotations[i, 1, 0], rotations[i, 1, 1],
+            rotations[i, 1, 2], rotations[i, 2, 0], rotations[i, 2, 1], rotations[i, 2, 2], angular_momenta[i, 0],
+            angular_momenta[i, 1], angular_momenta[i, 2], principal_moments[i, 0], principal_moments[i, 1],
+            principal_moments[i, 2])
+
+
+@njit(cache=True)
+def body_rotations(count, orientations, rotations):
+    """rotations[i] = R(q_i) for every body ((n, 3, 3), the matrices the members and the loads read)."""
+    for i in range(count):
+        (rotations[i, 0, 0], rotations[i, 0, 1], rotations[i, 0, 2], rotations[i, 1, 0], rotations[i, 1, 1],
+         rotations[i, 1, 2], rotations[i, 2, 0], rotations[i, 2, 1], rotations[i, 2, 2]) = rotation_entries(
+            orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3])
 
 
 @njit(cache=True)
 def angular_velocities_from_momenta(count, orientations, angular_momenta, principal_moments, out):
     """out[i] = omega (world) = R diag(1/I) R^T L."""
-    rotation = np.empty((3, 3))
-    body_omega = np.empty(3)
     for i in range(count):
-        rotation_matrix(orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3], rotation)
-        for row in range(3):
-            body_omega[row] = (rotation[0, row] * angular_momenta[i, 0] + rotation[1, row] * angular_momenta[i, 1]
-                               + rotation[2, row] * angular_momenta[i, 2]) / principal_moments[i, row]
-        for row in range(3):
-            out[i, row] = (rotation[row, 0] * body_omega[0] + rotation[row, 1] * body_omega[1]
-                           + rotation[row, 2] * body_omega[2])
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_entries(
+            orientations[i, 0], orientations[i, 1], orientations[i, 2], orientations[i, 3])
+        (out[i, 0], out[i, 1], out[i, 2]) = _spin(r00, r01, r02, r10, r11, r12, r20, r21, r22, angular_momenta[i, 0],
+                                                  angular_momenta[i, 1], angular_momenta[i, 2],
+                                                  principal_moments[i, 0], principal_moments[i, 1],
+                                                  principal_moments[i, 2])
 
 
 @njit(cache=True)
@@ -168,59 +273,122 @@ def rotational_energies(count, orientations, angular_momenta, principal_moments,
         out[i] = energy
 
 
-@njit(cache=True)
-def member_states(member_count, member_body, member_offsets, body_positions, body_velocities, orientations,
-                  body_angular_velocities, out_positions, out_velocities, out_angular_velocities):
-    """World state of member spheres from their bodies' state.
+@njit(inline="always", cache=True)
+def _member_velocity(body_velocity0, body_velocity1, body_velocity2, w0, w1, w2, r0, r1, r2):
+    """v = v_b + omega x r."""
+    return (body_velocity0 + w1 * r2 - w2 * r1, body_velocity1 + w2 * r0 - w0 * r2, body_velocity2 + w0 * r1 - w1 * r0)
 
-    member_offsets (m, 3): each member's centre relative to its body's centre of mass, in the body
-    principal frame (`shape.MassProperties.member_offsets`).  r = R(q) offset;  x = x_b + r;
-    v = v_b + omega x r;  the member spins with its body's omega.
-    """
-    rotation = np.empty((3, 3))
+
+@njit(cache=True)
+def member_levers(member_count, member_body, member_offsets, rotations, levers):
+    """levers[m] = R(q_b) offset_m, the member's centre relative to its body's centre of mass (world;
+    rotations: body_rotations)."""
     for m in range(member_count):
         b = member_body[m]
-        rotation_matrix(orientations[b, 0], orientations[b, 1], orientations[b, 2], orientations[b, 3], rotation)
-        r0 = rotation[0, 0] * member_offsets[m, 0] + rotation[0, 1] * member_offsets[m, 1] + rotation[0, 2] * member_offsets[m, 2]
-        r1 = rotation[1, 0] * member_offsets[m, 0] + rotation[1, 1] * member_offsets[m, 1] + rotation[1, 2] * member_offsets[m, 2]
-        r2 = rotation[2, 0] * member_offsets[m, 0] + rotation[2, 1] * member_offsets[m, 1] + rotation[2, 2] * member_offsets[m, 2]
+        for axis in range(3):
+            levers[m, axis] = (rotations[b, axis, 0] * member_offsets[m, 0]
+                               + rotations[b, axis, 1] * member_offsets[m, 1]
+                               + rotations[b, axis, 2] * member_offsets[m, 2])
+
+
+@njit(cache=True)
+def place_members(rows, member_body, member_offsets, rotations, body_positions, body_velocities,
+                  body_angular_velocities, levers, positions, velocities, angular_velocities, positions_at_build):
+    """World state of the member spheres from their bodies' state, written into their particle rows
+    (member m is row rows[m]).
+
+    member_offsets (m, 3): each member's centre relative to its body's centre of mass, in the body
+    principal frame (`shape.MassProperties.member_offsets`).  r = R(q) offset (kept in levers[m] for
+    the load sum and the second half);  x = x_b + r;  v = v_b + omega x r;  the member spins with its
+    body's omega.  Returns the largest squared displacement of a member since the list build (inf
+    when one is not finite)."""
+    member_levers(rows.shape[0], member_body, member_offsets, rotations, levers)
+    largest = 0.0
+    for m in range(rows.shape[0]):
+        b = member_body[m]
+        i = rows[m]
+        displacement_squared = 0.0
+        for axis in range(3):
+            positions[i, axis] = body_positions[b, axis] + levers[m, axis]
+            offset = positions[i, axis] - positions_at_build[i, axis]
+            displacement_squared += offset * offset
+        largest = keep_largest(largest, displacement_squared)
         w0 = body_angular_velocities[b, 0]
         w1 = body_angular_velocities[b, 1]
         w2 = body_angular_velocities[b, 2]
-        out_positions[m, 0] = body_positions[b, 0] + r0
-        out_positions[m, 1] = body_positions[b, 1] + r1
-        out_positions[m, 2] = body_positions[b, 2] + r2
-        out_velocities[m, 0] = body_velocities[b, 0] + w1 * r2 - w2 * r1
-        out_velocities[m, 1] = body_velocities[b, 1] + w2 * r0 - w0 * r2
-        out_velocities[m, 2] = body_velocities[b, 2] + w0 * r1 - w1 * r0
-        out_angular_velocities[m, 0] = w0
-        out_angular_velocities[m, 1] = w1
-        out_angular_velocities[m, 2] = w2
+        velocities[i, 0], velocities[i, 1], velocities[i, 2] = _member_velocity(
+            body_velocities[b, 0], body_velocities[b, 1], body_velocities[b, 2], w0, w1, w2, levers[m, 0],
+            levers[m, 1], levers[m, 2])
+        angular_velocities[i, 0] = w0
+        angular_velocities[i, 1] = w1
+        angular_velocities[i, 2] = w2
+    return largest
+
+
+@njit(cache=True)
+def move_members(rows, member_body, levers, body_velocities, body_angular_velocities, velocities, angular_velocities):
+    """The members' velocities and spins after the second half kick (positions and levers unchanged)."""
+    for m in range(rows.shape[0]):
+        b = member_body[m]
+        i = rows[m]
+        w0 = body_angular_velocities[b, 0]
+        w1 = body_angular_velocities[b, 1]
+        w2 = body_angular_velocities[b, 2]
+        velocities[i, 0], velocities[i, 1], velocities[i, 2] = _member_velocity(
+            body_velocities[b, 0], body_velocities[b, 1], body_velocities[b, 2], w0, w1, w2, levers[m, 0],
+            levers[m, 1], levers[m, 2])
+        angular_velocities[i, 0] = w0
+        angular_velocities[i, 1] = w1
+        angular_velocities[i, 2] = w2
+
+
+@njit(cache=True)
+def member_states(member_count, member_body, member_offsets, body_positions, body_velocities, orientations,
+                  body_angular_velocities, out_positions, out_velocities, out_angular_velocities):
+    """place_members into separate arrays (member m in row m), from the orientations."""
+    rotations = np.empty((orientations.shape[0], 3, 3))
+    body_rotations(orientations.shape[0], orientations, rotations)
+    place_members(np.arange(member_count), member_body, member_offsets, rotations, body_positions, body_velocities,
+                  body_angular_velocities, np.empty((member_count, 3)), out_positions, out_velocities,
+                  out_angular_velocities, np.zeros((member_count, 3)))
+
+
+@njit(cache=True)
+def sum_row_loads(rows, member_body, levers, forces, torques, body_forces, body_torques):
+    """Zero the bodies' loads, then add their members' (member m is particle row rows[m]):
+    F_b += f_m;  T_b += r_m x f_m + t_m.
+
+    r_m = R(q) offset is the lever from the centre of mass to the member centre (place_members),
+    taken from the orientation (not from positions, which may be periodic images).  t_m is the
+    member's own torque about its centre (the contact moments r_c x f of its contacts plus rolling
+    torques)."""
+    body_forces[:] = 0.0
+    body_torques[:] = 0.0
+    for m in range(rows.shape[0]):
+        b = member_body[m]
+        i = rows[m]
+        r0 = levers[m, 0]
+        r1 = levers[m, 1]
+        r2 = levers[m, 2]
+        f0 = forces[i, 0]
+        f1 = forces[i, 1]
+        f2 = forces[i, 2]
+        body_forces[b, 0] += f0
+        body_forces[b, 1] += f1
+        body_forces[b, 2] += f2
+        body_torques[b, 0] += r1 * f2 - r2 * f1 + torques[i, 0]
+        body_torques[b, 1] += r2 * f0 - r0 * f2 + torques[i, 1]
+        body_torques[b, 2] += r0 * f1 - r1 * f0 + torques[i, 2]
 
 
 @njit(cache=True)
 def sum_member_loads(member_count, member_body, member_offsets, orientations, member_forces, member_torques,
                      body_forces, body_torques):
-    """Add member loads to their bodies: F_b += f_m;  T_b += r_m x f_m + t_m.
-
-    r_m = R(q) offset is the lever from the centre of mass to the member centre, taken from the
-    orientation (not from positions, which may be periodic images).  t_m is the member's own torque
-    about its centre (the contact moments r_c x f of its contacts plus rolling torques).  The caller
-    zeroes body_forces and body_torques first.
-    """
-    rotation = np.empty((3, 3))
-    for m in range(member_count):
-        b = member_body[m]
-        rotation_matrix(orientations[b, 0], orientations[b, 1], orientations[b, 2], orientations[b, 3], rotation)
-        r0 = rotation[0, 0] * member_offsets[m, 0] + rotation[0, 1] * member_offsets[m, 1] + rotation[0, 2] * member_offsets[m, 2]
-        r1 = rotation[1, 0] * member_offsets[m, 0] + rotation[1, 1] * member_offsets[m, 1] + rotation[1, 2] * member_offsets[m, 2]
-        r2 = rotation[2, 0] * member_offsets[m, 0] + rotation[2, 1] * member_offsets[m, 1] + rotation[2, 2] * member_offsets[m, 2]
-        f0 = member_forces[m, 0]
-        f1 = member_forces[m, 1]
-        f2 = member_forces[m, 2]
-        body_forces[b, 0] += f0
-        body_forces[b, 1] += f1
-        body_forces[b, 2] += f2
-        body_torques[b, 0] += r1 * f2 - r2 * f1 + member_torques[m, 0]
-        body_torques[b, 1] += r2 * f0 - r0 * f2 + member_torques[m, 1]
-        body_torques[b, 2] += r0 * f1 - r1 * f0 + member_torques[m, 2]
+    """sum_row_loads from separate arrays (member m in row m), the levers from the orientations; the
+    bodies' loads are zeroed first."""
+    rotations = np.empty((orientations.shape[0], 3, 3))
+    body_rotations(orientations.shape[0], orientations, rotations)
+    levers = np.empty((member_count, 3))
+    member_levers(member_count, member_body, member_offsets, rotations, levers)
+    sum_row_loads(np.arange(member_count), member_body, levers, member_forces, member_torques, body_forces,
+                  body_torques)

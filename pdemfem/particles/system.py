@@ -165,8 +165,8 @@ class ParticleSystem(kinds.StateComponent):
                                                       state.angular_velocities, state.forces, state.torques,
                                                       state.inverse_mass, state.inverse_inertia, self.gravity,
                                                       0.5 * dt, dt, state.positions_at_build)
-            # kick_drift zeroed the owned rows' loads; a rebuild (new rows, new order) clears this.
-            self._owned_loads_zeroed = True
+        # Either zeroed the owned rows' loads; a rebuild (new rows, new order) clears this.
+        self._owned_loads_zeroed = True
         if self.comm.size > 1:
             largest_displacement_squared = self.reductions.largest(self.comm, largest_displacement_squared)
         # Read by the run monitor's runaway stop (same value on every rank).
