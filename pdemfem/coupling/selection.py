@@ -1,0 +1,78 @@
+"""Which nodes of a solid's contact surface a rank gathers: the triangles near its own particles.
+
+The DEM side is cut into one box per rank (RCB) and a rank computes the triangle contacts of the
+particles it owns only, so it needs the current state of the triangles its particles can reach, not
+of the whole surface.  A *selection* (one per coupled surface and rank) is
+
+    region   Q = the box of the rank's owned particles at the last list build, widened by skin/2:
+             between two builds no particle moves further than skin/2 (the list's own rebuild
+             rule), so every owned particle stays in Q until the next build
+    rows     the surface nodes of every triangle whose bounding box (at the selection's positions)
+             meets Q widened by reach = largest radius + cohesion reach + margin
+    gather   a PETSc scatter of those nodes from their owners (fem/surface.py NodeGather)
+
+with margin = MARGIN_RADII largest particle radii.  The triangles left out keep their vertex data
+of the selection's time.  They cannot touch a particle while
+
+    (a) the particle region stays within Q_selection widened by margin/2 (checked at every list
+        build: particles migrate, rebalance, arrive only then), and
+    (b) no surface node has moved more than margin/2 since the selection (checked after every FE
+        advance: the surface moves only then),
+
+since a left-out triangle's box, stale or current, then stays further than largest radius +
+cohesion reach from every owned particle (margin - margin/2 - margin/2 = 0 to spare beyond the contact
+reach).  When (a) or (b) fails on any rank, every rank selects anew (creating a scatter is collective;
+one reduction decides, at a list build for (a), at an advance for (b)).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from pdemfem.fem.surface import NodeGather
+
+# The margin, in largest particle radii: wider selects more nodes, narrower selects anew more often.
+MARGIN_RADII = 4.0
+
+
+def particle_region(positions, skin: float):
+    """(lower, upper) of the box of `positions` widened by skin/2, None without particles."""
+    if not len(positions):
+        return None
+    return positions.min(axis=0) - 0.5 * skin, positions.max(axis=0) + 0.5 * skin
+
+
+def region_within(inner, outer, slack: float) -> bool:
+    """Whether box `inner` lies in box `outer` widened by slack (an empty inner lies anywhere)."""
+    if inner is None:
+        return True
+    if outer is None:
+        return False
+    return bool(np.all(inner[0] >= outer[0] - slack) and np.all(inner[1] <= outer[1] + slack))
+
+
+def rows_near(vertices, triangles, region, reach: float) -> np.ndarray:
+    """Rows (into vertices, ascending) of the vertices of every triangle whose bounding box meets `region`
+    widened by reach (none for an empty region)."""
+    if region is None or not len(triangles):
+        return np.zeros(0, dtype=np.int64)
+    corners = vertices[triangles]                      # (nt, 3, 3)
+    lower, upper = corners.min(axis=1), corners.max(axis=1)
+    near = np.all((upper >= region[0] - reach) & (lower <= region[1] + reach), axis=1)
+    return np.unique(triangles[near])
+
+
+class SurfaceSelection:
+    """A rank's selection (module docstring): its region, rows, gather, and the owned surface nodes'
+    displacements when it was made (for the drift test (b))."""
+
+    def __init__(self, gather: NodeGather, region, owned_displacements: np.ndarray):
+        self.gather = gather
+        self.rows = gather.rows
+        self.region = region
+        self.owned_displacements = owned_displacements
+
+    def drift(self, owned_displacements: np.ndarray) -> float:
+        """Largest movement [m] of this rank's owned surface nodes since the selection."""
+        if not len(owned_displacements):
+            return 0.0
+        return float(np.sqrt(np.max(np.sum((owned_displacements - self.owned_displacements) ** 2, axis=1))))
