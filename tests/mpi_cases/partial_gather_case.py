@@ -5,7 +5,9 @@ CASE  spread: grains over the whole 0.4 m plate, settling (each rank's share of 
       fall:   grains 5 cm above the plate falling onto it (first selection empty: the particles must
               bring the plate into their selection as they come down);
       rise:   no gravity, grains at rest 5 cm above the plate, which is driven up into them at 2 m/s
-              (the surface must bring itself into the selection as it moves).
+              (the surface must bring itself into the selection as it moves);
+      hot:    spread with heat (grains at 500 K, the plate at 300 K conducts) and fem_every 3 (the surface
+              temperatures gathered, the contacts' heat and dashpots of 3-step windows sent to the plate).
 MODE  whole: the whole gather (CoupledSurface.partial_gather off); frozen: the partial gather whose
       selection is never made anew after the first one (the negative control); ulp (serial): particle 0
       shifted by one unit in the last place of x (the round-off growth reference); default: partial.
@@ -27,7 +29,7 @@ from pdemfem.coupling.surface import CoupledSurface  # noqa: E402
 
 def wide_plate(case: str) -> dict:
     top = 0.02
-    if case == "spread":
+    if case in ("spread", "hot"):
         region, velocity, gravity = [[0.01, 0.01, 0.026], [0.39, 0.09, 0.05]], [0.0, 0.0, 0.0], -9.81
     elif case == "fall":
         region, velocity, gravity = [[0.01, 0.01, 0.075], [0.39, 0.09, 0.1]], [0.0, 0.0, -2.0], -9.81
@@ -39,7 +41,7 @@ def wide_plate(case: str) -> dict:
         plate["prescribed"] = [{"group": group, "velocity": [0.0, 0.0, 2.0]} for group in ("xmin", "xmax")]
     else:
         plate["fixed"] = ["xmin", "xmax"]
-    return {
+    scene = {
         "time": {"end": 1.0, "dt": 4e-5},
         "gravity": [0.0, 0.0, gravity],
         "materials": {"grain": {"density": 2500.0, "youngs_modulus": 1e7, "poisson_ratio": 0.3},
@@ -50,6 +52,13 @@ def wide_plate(case: str) -> dict:
                                   "velocity": velocity}}],
         "solids": [plate],
     }
+    if case == "hot":
+        scene["materials"]["grain"].update(conductivity=1.0, heat_capacity=0.5)
+        scene["materials"]["plate"].update(conductivity=200.0, heat_capacity=0.9)
+        scene["particles"][0]["initial_temperature"] = 500.0
+        plate.update(initial_temperature=300.0, reference_temperature=300.0)
+        scene["coupling"] = {"fem_every": 3}
+    return scene
 
 
 def main():
@@ -86,12 +95,14 @@ def main():
     ids = comm.gather(p.ids, root=0)
     positions = comm.gather(p.positions, root=0)
     velocities = comm.gather(p.velocities, root=0)
+    temperatures = comm.gather(p.temperatures if p.temperatures is not None else np.zeros(len(p.ids)), root=0)
     selected = comm.gather(largest_selection, root=0)
     if comm.rank == 0:
         ids = np.concatenate(ids)
         order = np.argsort(ids)
         np.savez(out, ids=ids[order], positions=np.concatenate(positions)[order],
                  velocities=np.concatenate(velocities)[order], forces=np.array(forces),
+                 temperatures=np.concatenate(temperatures)[order],
                  selected=np.array(selected), nodes=len(surface.node_indices), selections=surface.selections)
 
 
