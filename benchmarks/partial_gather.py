@@ -6,7 +6,10 @@ whole plate (`--cover 1`) or over part of it (`--cover 0.5`: x < 0.3 m).  The sa
 whole gather (every rank gathers all surface nodes after every advance) and with the partial one;
 the timer wraps CoupledSurface.refresh_vertices (the gather, the vertex update and, for the partial
 gather, the drift test and any new selection with its whole gather) and NodeGather.state (the
-scatter alone), per advance, largest over the ranks.
+scatters), per advance, largest over the ranks.  These in-run times include the wait for the slower
+rank (the scatter is where the ranks meet after the FE advance), so the script also times the two
+gathers alone after the run: `--repeat` calls each of the whole gather and the rank's selection
+(displacement and velocity), the ranks started together by a barrier, best of 5 rounds.
 
     python -m pdemfem.launch -n 2 -- python benchmarks/partial_gather.py
     python -m pdemfem.launch -n 2 -- python benchmarks/partial_gather.py --cells 90 --cover 0.5
@@ -75,8 +78,23 @@ def measure(args, partial: bool) -> dict:
     largest = np.zeros(2)
     comm.Allreduce(local, largest, op=MPI.MAX)
     gathered = len(surface.selection.rows) if surface.selection is not None else len(surface.node_indices)
-    return {"refresh": largest[0], "gather": largest[1], "gathered": comm.gather(gathered, root=0),
-            "nodes": len(surface.node_indices), "selections": surface.selections, "advances": advances}
+    result = {"refresh": largest[0], "gather": largest[1], "gathered": comm.gather(gathered, root=0),
+              "nodes": len(surface.node_indices), "selections": surface.selections, "advances": advances}
+    if surface.selection is not None:
+        solid = surface.solid
+        gathers = {"whole": solid.contact_surface().whole, "partial": surface.selection.gather}
+        best = {name: float("inf") for name in gathers}
+        for _ in range(5):
+            for name, gather in gathers.items():
+                comm.Barrier()
+                start = time.perf_counter()
+                for _ in range(args.repeat):
+                    gather.state(solid.displacement_vec, solid.velocity_vec)
+                elapsed = np.array([(time.perf_counter() - start) / args.repeat])
+                comm.Allreduce(MPI.IN_PLACE, elapsed, op=MPI.MAX)
+                best[name] = min(best[name], float(elapsed[0]))
+        result["alone"] = best
+    return result
 
 
 def main():
@@ -86,6 +104,7 @@ def main():
     parser.add_argument("--count", type=int, default=1500)
     parser.add_argument("--warmup", type=int, default=20)
     parser.add_argument("--steps", type=int, default=200)
+    parser.add_argument("--repeat", type=int, default=200, help="calls per timing of a gather alone")
     args = parser.parse_args()
     wrap(CoupledSurface, "refresh_vertices", "refresh")
     wrap(NodeGather, "state", "gather")
@@ -98,6 +117,10 @@ def main():
         for mode, row in rows:
             print(f"{mode:8s} {str(row['gathered']):>18s} {row['selections']:>10d} {1e6 * row['gather']:13.1f} "
                   f"{1e6 * row['refresh']:13.1f}")
+        alone = [row["alone"] for mode, row in rows if "alone" in row]
+        print("the gathers alone (u and v), per advance [us], best of 5 rounds of", args.repeat, "calls:")
+        for name in ("whole", "partial"):
+            print(f"  {name:8s} " + "  ".join(f"{1e6 * times[name]:8.1f}" for times in alone))
 
 
 if __name__ == "__main__":

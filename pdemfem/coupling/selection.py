@@ -27,6 +27,7 @@ one reduction decides, at a list build for (a), at an advance for (b)).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from pdemfem.fem.surface import NodeGather
 
@@ -71,8 +72,36 @@ class SurfaceSelection:
         self.region = region
         self.owned_displacements = owned_displacements
 
-    def drift(self, owned_displacements: np.ndarray) -> float:
-        """Largest movement [m] of this rank's owned surface nodes since the selection."""
-        if not len(owned_displacements):
-            return 0.0
-        return float(np.sqrt(np.max(np.sum((owned_displacements - self.owned_displacements) ** 2, axis=1))))
+    def drift(self, local_displacements: np.ndarray, owned_local_rows: np.ndarray) -> float:
+        """Largest movement [m] of this rank's owned surface nodes since the selection (local_displacements: the
+        rank's (owned nodes, 3) part of the displacement; owned_local_rows: its surface nodes' rows in it)."""
+        return largest_drift(local_displacements, owned_local_rows, self.owned_displacements)
+
+
+@njit(cache=True)
+def largest_drift(local_displacements, owned_local_rows, displacements_then):
+    """max_k |u[owned_local_rows[k]] - displacements_then[k]| (0 without rows)."""
+    largest = 0.0
+    for k in range(owned_local_rows.shape[0]):
+        row = owned_local_rows[k]
+        squared = 0.0
+        for axis in range(3):
+            step = local_displacements[row, axis] - displacements_then[k, axis]
+            squared += step * step
+        largest = max(largest, squared)
+    return np.sqrt(largest)
+
+
+@njit(cache=True)
+def refresh_rows(rows, reference_positions, displacements, velocities, interval, vertices, vertex_velocities):
+    """The selected vertices after an advance: x = X + u, and as velocity the chord (x - x_before) / interval
+    (x_before: the vertex as it stands, the state before the advance) or, for interval <= 0, the solid's own."""
+    for k in range(rows.shape[0]):
+        row = rows[k]
+        for axis in range(3):
+            position = reference_positions[row, axis] + displacements[k, axis]
+            if interval > 0.0:
+                vertex_velocities[row, axis] = (position - vertices[row, axis]) / interval
+            else:
+                vertex_velocities[row, axis] = velocities[k, axis]
+            vertices[row, axis] = position

@@ -81,10 +81,8 @@ class SolidTriangleSurface(TriangleSurface):
             summed = summed[:-1]
         super().take_summed_totals(summed)
 
-    def set_vertex_rows(self, rows, positions, velocities) -> None:
-        """New positions and velocities of the vertices `rows` (the others keep theirs)."""
-        self.vertices[rows] = positions
-        self.vertex_velocities[rows] = velocities
+    def mark_vertices_moved(self) -> None:
+        """Some vertices were written in place (set_vertices' bookkeeping without the copy)."""
         self._bvh_current = False
         self._vertices_moved = True
 
@@ -428,13 +426,16 @@ class CoupledSurface(kinds.StateComponent):
             self._refresh_whole()
             self._select(self._region)
             return
-        rows = self.selection.rows
-        positions, velocities = self.selection.gather.state(self.solid.displacement_vec, self.solid.velocity_vec)
-        if self._last_interval is not None:
-            velocities = (positions - self._positions_before[rows]) / interval
-        surface.set_vertex_rows(rows, positions, velocities)
+        # The vertices stand where remember_positions found them: their rows are the positions before the advance.
+        contact = self.solid.contact_surface()
+        displacements, velocities = self.selection.gather.pair_views(self.solid.displacement_vec,
+                                                                     self.solid.velocity_vec)
+        chosen.refresh_rows(self.selection.rows, contact.reference_positions, displacements, velocities,
+                            -1.0 if self._last_interval is None else float(self._last_interval),
+                            surface.vertices, surface.vertex_velocities)
+        surface.mark_vertices_moved()
         self._stale = True
-        drift = self.selection.drift(self.solid.contact_surface().owned_values(self.solid.displacement_vec))
+        drift = self.selection.drift(contact.local_values(self.solid.displacement_vec), contact.owned_local_rows)
         surface.flag = 1.0 if drift > 0.25 * self._margin else 0.0
 
     # ------------------------------------------------------------ partial gather

@@ -30,6 +30,7 @@ class NodeGather:
         self.rows = np.ascontiguousarray(rows, dtype=np.int64)
         nodes = surface.node_indices[self.rows].astype(PETSc.IntType)
         self._gathered = PETSc.Vec().createSeq(3 * len(nodes), bsize=3, comm=PETSc.COMM_SELF)
+        self._gathered_second = self._gathered.duplicate()
         source = PETSc.IS().createBlock(3, nodes, comm=PETSc.COMM_SELF)
         self._scatter = PETSc.Scatter().create(layout, source, self._gathered, None)
         self._scalar_scatter = None
@@ -42,6 +43,14 @@ class NodeGather:
         self._scatter.scatter(nodal, self._gathered, addv=PETSc.InsertMode.INSERT_VALUES,
                               mode=PETSc.ScatterMode.FORWARD)
         return self._gathered.getArray(readonly=True).reshape(-1, 3).copy()
+
+    def pair_views(self, first: PETSc.Vec, second: PETSc.Vec) -> tuple[np.ndarray, np.ndarray]:
+        """Collective: two nodal vector fields at the rows as read-only (len(rows), 3) views of this gather's
+        buffers, valid until its next call (no copy: the partial refresh reads them once)."""
+        for nodal, buffer in ((first, self._gathered), (second, self._gathered_second)):
+            self._scatter.scatter(nodal, buffer, addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
+        return (self._gathered.getArray(readonly=True).reshape(-1, 3),
+                self._gathered_second.getArray(readonly=True).reshape(-1, 3))
 
     def scalar(self, nodal: PETSc.Vec) -> np.ndarray:
         """Collective: a nodal scalar field (block size 1, e.g. the temperature) at the rows; the scatter is
@@ -86,6 +95,10 @@ class ContactSurface:
     def owned_values(self, nodal: PETSc.Vec) -> np.ndarray:
         """A nodal vector field (block size 3) at the surface nodes this rank owns (rows owned_rows), no communication."""
         return nodal.getArray(readonly=True).reshape(-1, 3)[self.owned_local_rows].copy()
+
+    def local_values(self, nodal: PETSc.Vec) -> np.ndarray:
+        """This rank's part of a nodal vector field (block size 3) as a read-only (owned nodes, 3) view."""
+        return nodal.getArray(readonly=True).reshape(-1, 3)
 
     def gather_scalar(self, nodal: PETSc.Vec) -> np.ndarray:
         """Collective: a nodal scalar field (e.g. the temperature, block size 1) at node_indices, on every rank."""

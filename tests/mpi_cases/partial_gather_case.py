@@ -72,7 +72,7 @@ def main():
 
         # Keep the first selection for the whole run: the particle region and the surface never count as moved.
         selection.region_within = lambda inner, outer, slack: outer is not None
-        selection.SurfaceSelection.drift = lambda self, displacements: 0.0
+        selection.SurfaceSelection.drift = lambda self, *arguments: 0.0
     from petsc4py import PETSc
 
     PETSc.Options().setValue("fem_ksp_rtol", "1e-13")  # as coupling_agreement.py: partitions agree on the start
