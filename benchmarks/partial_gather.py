@@ -5,11 +5,13 @@ A 0.6 x 0.6 x 0.02 m plate clamped at x = 0 and 0.6, meshed CELLS x CELLS x 1 he
 whole plate (`--cover 1`) or over part of it (`--cover 0.5`: x < 0.3 m).  The same run is timed with the
 whole gather (every rank gathers all surface nodes after every advance) and with the partial one;
 the timer wraps CoupledSurface.refresh_vertices (the gather, the vertex update and, for the partial
-gather, the drift test and any new selection with its whole gather) and NodeGather.state (the
-scatters), per advance, largest over the ranks.  These in-run times include the wait for the slower
+gather, the drift test and any new selection with its whole gather) and the scatters it calls
+(NodeGather.state for the whole surface, NodeGather.pair_views for a selection), per advance,
+largest over the ranks.  These in-run times include the wait for the slower
 rank (the scatter is where the ranks meet after the FE advance), so the script also times the two
-gathers alone after the run: `--repeat` calls each of the whole gather and the rank's selection
-(displacement and velocity), the ranks started together by a barrier, best of 5 rounds.
+gathers alone after the run, as the refresh calls them (displacement and velocity: the whole
+surface's positions and velocities as arrays, the selection's as views of its buffers): `--repeat`
+calls each, the ranks started together by a barrier, best of 5 rounds.
 
     python -m pdemfem.launch -n 2 -- python benchmarks/partial_gather.py
     python -m pdemfem.launch -n 2 -- python benchmarks/partial_gather.py --cells 90 --cover 0.5
@@ -82,14 +84,14 @@ def measure(args, partial: bool) -> dict:
               "nodes": len(surface.node_indices), "selections": surface.selections, "advances": advances}
     if surface.selection is not None:
         solid = surface.solid
-        gathers = {"whole": solid.contact_surface().whole, "partial": surface.selection.gather}
+        gathers = {"whole": solid.contact_surface().whole.state, "partial": surface.selection.gather.pair_views}
         best = {name: float("inf") for name in gathers}
         for _ in range(5):
             for name, gather in gathers.items():
                 comm.Barrier()
                 start = time.perf_counter()
                 for _ in range(args.repeat):
-                    gather.state(solid.displacement_vec, solid.velocity_vec)
+                    gather(solid.displacement_vec, solid.velocity_vec)
                 elapsed = np.array([(time.perf_counter() - start) / args.repeat])
                 comm.Allreduce(MPI.IN_PLACE, elapsed, op=MPI.MAX)
                 best[name] = min(best[name], float(elapsed[0]))
@@ -108,6 +110,7 @@ def main():
     args = parser.parse_args()
     wrap(CoupledSurface, "refresh_vertices", "refresh")
     wrap(NodeGather, "state", "gather")
+    wrap(NodeGather, "pair_views", "gather")
     rows = [(mode, measure(args, mode == "partial")) for mode in ("whole", "partial", "whole", "partial")]
     if MPI.COMM_WORLD.rank == 0:
         print(f"{MPI.COMM_WORLD.size} ranks, {rows[0][1]['nodes']} surface nodes, {args.count} grains over "
