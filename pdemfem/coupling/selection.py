@@ -16,13 +16,18 @@ of the selection's time.  They cannot touch a particle while
 
     (a) the particle region stays within Q_selection widened by margin/2 (checked at every list
         build: particles migrate, rebalance, arrive only then), and
-    (b) no surface node has moved more than margin/2 since the selection (checked after every FE
-        advance: the surface moves only then),
+    (b) no surface node has moved more than margin/2 since the selection (the surface moves only at
+        the FE advances),
 
 since a left-out triangle's box, stale or current, then stays further than largest radius +
 cohesion reach from every owned particle (margin - margin/2 - margin/2 = 0 to spare beyond the contact
-reach).  When (a) or (b) fails on any rank, every rank selects anew (creating a scatter is collective;
-one reduction decides, at a list build for (a), at an advance for (b)).
+reach).  When (a) fails on any rank, every rank selects anew at once (one MAX reduction at each list
+build, before the contacts; creating a scatter is collective).  For (b) each rank measures, after
+every advance, the drift of the surface nodes it owns in the FE layout (no communication); a drift
+beyond margin/4 rides the next DEM step's one SUM as a flag (no collective of its own) and every rank
+selects anew at the following advance.  The quarter margin left covers that one advance's motion: a
+surface moving a particle radius (margin/4) within one advance already overlaps a touching grain by a
+radius in one step, beyond what the coupled step resolves.
 """
 from __future__ import annotations
 

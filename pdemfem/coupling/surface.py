@@ -28,9 +28,10 @@ Partial gather (pdemfem.coupling.selection).  On several ranks, in a simulation 
 surface without motion refreshes after each advance only the nodes of the triangles near the rank's own
 particles (one PETSc scatter of those nodes); the others keep the positions of the selection's time,
 and no particle can reach them (selection.py gives the bound).  A rank selects anew, together with all
-others, when its particles leave the region the selection was made for (checked at each list build)
-or the surface has moved more than half the margin (checked after each advance; one reduction).  The
-whole surface is brought back (every rank, collective) whenever all of it is needed: a new selection,
+others, when its particles leave the region the selection was made for (checked at each list build:
+one reduction) or the surface has drifted more than a quarter margin (measured after each advance on
+the nodes each rank owns; a flag in the next DEM step's one SUM, the new selection at the next advance).
+The whole surface is brought back (every rank, collective) whenever all of it is needed: a new selection,
 a checkpoint (the surface's vertices are written as one array for all ranks), `refresh_vertices()`
 without an interval.  Nothing else reads the left-out vertices: contacts, their dashpot records,
 heat and the blended gap involve only the triangles a particle touches.  Moving-frame solids and
