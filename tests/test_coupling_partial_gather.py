@@ -44,6 +44,7 @@ def test_each_rank_gathers_its_share_and_the_physics_is_unchanged(tmp_path):
     nodes = int(partial["nodes"])
     print(f"surface nodes {nodes}, largest selection per rank {partial['selected']}, selections {partial['selections']}")
     assert np.all(whole["selected"] == nodes)
+    assert np.all(serial["selected"] == nodes)  # one rank: the whole gather is a local copy, kept
     # Each rank's half of the grains (x < 0.2 or x > 0.2) plus the margin (4 radii + reach, 2.8 cm): about
     # 60 % of the plate, never the whole of it.
     assert np.all(partial["selected"] < 0.75 * nodes) and np.all(partial["selected"] > 0)
@@ -85,3 +86,13 @@ def test_heat_and_windows_are_unchanged(tmp_path):
     assert np.min(whole["temperatures"]) < 499.0  # the grains gave the plate heat (they start at 500 K)
     for key in ("positions", "velocities", "forces", "temperatures"):
         assert np.array_equal(partial[key], whole[key]), key
+
+
+@pytest.mark.mpi
+def test_a_scene_with_a_stream_keeps_the_whole_gather(tmp_path):
+    """A stream's insertion tests its candidates against every triangle on every rank (all ranks must accept
+    the same ones), so no rank may hold stale triangles."""
+    result = run(tmp_path, 2, "stream", 300)
+    assert result["selections"] == 0
+    assert np.all(result["selected"] == result["nodes"])
+    assert len(result["ids"]) > 48  # the stream inserted grains while the plate was in the scene

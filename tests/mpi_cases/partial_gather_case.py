@@ -6,6 +6,7 @@ CASE  spread: grains over the whole 0.4 m plate, settling (each rank's share of 
               bring the plate into their selection as they come down);
       rise:   no gravity, grains at rest 5 cm above the plate, which is driven up into them at 2 m/s
               (the surface must bring itself into the selection as it moves);
+      stream: spread plus a stream of grains over the plate (the scene keeps the whole gather);
       hot:    spread with heat (grains at 500 K, the plate at 300 K conducts) and fem_every 3 (the surface
               temperatures gathered, the contacts' heat and dashpots of 3-step windows sent to the plate).
 MODE  whole: the whole gather (CoupledSurface.partial_gather off); frozen: the partial gather whose
@@ -29,7 +30,7 @@ from pdemfem.coupling.surface import CoupledSurface  # noqa: E402
 
 def wide_plate(case: str) -> dict:
     top = 0.02
-    if case in ("spread", "hot"):
+    if case in ("spread", "hot", "stream"):
         region, velocity, gravity = [[0.01, 0.01, 0.026], [0.39, 0.09, 0.05]], [0.0, 0.0, 0.0], -9.81
     elif case == "fall":
         region, velocity, gravity = [[0.01, 0.01, 0.075], [0.39, 0.09, 0.1]], [0.0, 0.0, -2.0], -9.81
@@ -52,6 +53,10 @@ def wide_plate(case: str) -> dict:
                                   "velocity": velocity}}],
         "solids": [plate],
     }
+    if case == "stream":
+        scene["particles"].append({"name": "poured", "material": "grain", "radius": {"min": 0.0045, "max": 0.0055},
+                                   "insert": {"kind": "stream", "region": {"box": [[0.3, 0.02, 0.06], [0.38, 0.08, 0.08]]},
+                                              "rate": 2000.0, "interval": 0.01, "seed": 3}})
     if case == "hot":
         scene["materials"]["grain"].update(conductivity=1.0, heat_capacity=0.5)
         scene["materials"]["plate"].update(conductivity=200.0, heat_capacity=0.9)
