@@ -11,7 +11,8 @@ largest over the ranks.  These in-run times include the wait for the slower
 rank (the scatter is where the ranks meet after the FE advance), so the script also times the two
 gathers alone after the run, as the refresh calls them (displacement and velocity: the whole
 surface's positions and velocities as arrays, the selection's as views of its buffers): `--repeat`
-calls each, the ranks started together by a barrier, best of 5 rounds.
+calls each, the ranks started together by a barrier, best of 5 rounds; and the same for the whole
+refresh_vertices of either kind (gather, vertex update, drift test) on the run's last state.
 
     python -m pdemfem.launch -n 2 -- python benchmarks/partial_gather.py
     python -m pdemfem.launch -n 2 -- python benchmarks/partial_gather.py --cells 90 --cover 0.5
@@ -84,14 +85,24 @@ def measure(args, partial: bool) -> dict:
               "nodes": len(surface.node_indices), "selections": surface.selections, "advances": advances}
     if surface.selection is not None:
         solid = surface.solid
-        gathers = {"whole": solid.contact_surface().whole.state, "partial": surface.selection.gather.pair_views}
+        selection = surface.selection
+        interval = sim.dt * sim.fem_every
+
+        def refresh(chosen):
+            surface.selection = chosen  # None: the whole path (the same solid state: the timing only)
+            surface.refresh_vertices(interval)
+            surface.selection = selection
+
+        gathers = {"whole": lambda: solid.contact_surface().whole.state(solid.displacement_vec, solid.velocity_vec),
+                   "partial": lambda: selection.gather.pair_views(solid.displacement_vec, solid.velocity_vec),
+                   "refresh whole": lambda: refresh(None), "refresh partial": lambda: refresh(selection)}
         best = {name: float("inf") for name in gathers}
         for _ in range(5):
             for name, gather in gathers.items():
                 comm.Barrier()
                 start = time.perf_counter()
                 for _ in range(args.repeat):
-                    gather(solid.displacement_vec, solid.velocity_vec)
+                    gather()
                 elapsed = np.array([(time.perf_counter() - start) / args.repeat])
                 comm.Allreduce(MPI.IN_PLACE, elapsed, op=MPI.MAX)
                 best[name] = min(best[name], float(elapsed[0]))
@@ -122,8 +133,8 @@ def main():
                   f"{1e6 * row['refresh']:13.1f}")
         alone = [row["alone"] for mode, row in rows if "alone" in row]
         print("the gathers alone (u and v), per advance [us], best of 5 rounds of", args.repeat, "calls:")
-        for name in ("whole", "partial"):
-            print(f"  {name:8s} " + "  ".join(f"{1e6 * times[name]:8.1f}" for times in alone))
+        for name in ("whole", "partial", "refresh whole", "refresh partial"):
+            print(f"  {name:16s} " + "  ".join(f"{1e6 * times[name]:8.1f}" for times in alone))
 
 
 if __name__ == "__main__":
