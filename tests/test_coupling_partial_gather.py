@@ -62,7 +62,7 @@ def test_each_rank_gathers_its_share_and_the_physics_is_unchanged(tmp_path):
 @pytest.mark.mpi
 @pytest.mark.parametrize("case", ["fall", "rise"])
 def test_the_selection_follows_the_particles_and_the_surface(tmp_path, case):
-    steps = 1500
+    steps = 1000
     partial = run(tmp_path, 2, case, steps)
     whole = run(tmp_path, 2, case, steps, "whole")
     frozen = run(tmp_path, 2, case, steps, "frozen")
