@@ -42,7 +42,8 @@ def test_each_rank_gathers_its_share_and_the_physics_is_unchanged(tmp_path):
     partial = run(tmp_path, 2, "spread", steps)
     whole = run(tmp_path, 2, "spread", steps, "whole")
     nodes = int(partial["nodes"])
-    print(f"surface nodes {nodes}, largest selection per rank {partial['selected']}, selections {partial['selections']}")
+    print(f"surface nodes {nodes}, largest selection per rank {partial['selected']}, "
+          f"selections {partial['selections']}")
     assert np.all(whole["selected"] == nodes)
     assert np.all(serial["selected"] == nodes)  # one rank: the whole gather is a local copy, kept
     # Each rank's half of the grains (x < 0.2 or x > 0.2) plus the margin (4 radii + reach, 2.8 cm): about

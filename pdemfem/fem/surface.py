@@ -93,7 +93,8 @@ class ContactSurface:
         return NodeGather(self, rows, self._layout)
 
     def owned_values(self, nodal: PETSc.Vec) -> np.ndarray:
-        """A nodal vector field (block size 3) at the surface nodes this rank owns (rows owned_rows), no communication."""
+        """A nodal vector field (block size 3) at the surface nodes this rank owns (rows owned_rows); no
+        communication."""
         return nodal.getArray(readonly=True).reshape(-1, 3)[self.owned_local_rows].copy()
 
     def local_values(self, nodal: PETSc.Vec) -> np.ndarray:

@@ -55,7 +55,8 @@ def wide_plate(case: str) -> dict:
     }
     if case == "stream":
         scene["particles"].append({"name": "poured", "material": "grain", "radius": {"min": 0.0045, "max": 0.0055},
-                                   "insert": {"kind": "stream", "region": {"box": [[0.3, 0.02, 0.06], [0.38, 0.08, 0.08]]},
+                                   "insert": {"kind": "stream",
+                                              "region": {"box": [[0.3, 0.02, 0.06], [0.38, 0.08, 0.08]]},
                                               "rate": 2000.0, "interval": 0.01, "seed": 3}})
     if case == "hot":
         scene["materials"]["grain"].update(conductivity=1.0, heat_capacity=0.5)
