@@ -74,6 +74,8 @@ class Simulation:
         self.particle_system = self._build_particles()
         for surface in self.coupled_surfaces:
             surface.particle_system = self.particle_system
+            # A stream's insertion tests every triangle on every rank: those scenes keep the whole gather.
+            surface.allow_partial_gather(self.streams is None)
         self.fem_every = self._allowed_fem_every(interval_limit)
         self.coupling = CouplingDriver(self.solids, self.coupled_surfaces, self.dt, fem_every=self.fem_every,
                                        comm=self.comm)

@@ -23,6 +23,19 @@ orientation when the window's forces were turned into it): the particles' forces
 part is the work the frame fed in (`frame_work_local`, booked like a moving wall's), the elastic part
 is the solid's own business.  The dashpot records and their balance use velocities relative to the
 frame's material, as the conveyor's use the belt's.
+
+Partial gather (pdemfem.coupling.selection).  On several ranks, in a simulation without streams, a
+surface without motion refreshes after each advance only the nodes of the triangles near the rank's own
+particles (one PETSc scatter of those nodes); the others keep the positions of the selection's time,
+and no particle can reach them (selection.py gives the bound).  A rank selects anew, together with all
+others, when its particles leave the region the selection was made for (checked at each list build:
+one reduction) or the surface has drifted more than a quarter margin (measured after each advance on
+the nodes each rank owns; a flag in the next DEM step's one SUM, the new selection at the next advance).
+The whole surface is brought back (every rank, collective) whenever all of it is needed: a new selection,
+a checkpoint (the surface's vertices are written as one array for all ranks), `refresh_vertices()`
+without an interval.  Nothing else reads the left-out vertices: contacts, their dashpot records,
+heat and the blended gap involve only the triangles a particle touches.  Moving-frame solids and
+scenes with streams (whose insertion tests every triangle on every rank) keep the whole gather.
 """
 from __future__ import annotations
 
@@ -31,6 +44,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem import state_dict as kinds
+from pdemfem.coupling import selection as chosen
 from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_DAMPING, RECORD_ID, RECORD_INDEX, RECORD_TRIANGLE,
                                       RECORD_WEIGHTS, balance_particles,
                                       make_records,
@@ -41,7 +55,43 @@ from pdemfem.parallel.exchange import allgather_rows
 from pdemfem.walls.mesh import TriangleSurface
 
 
+class SolidTriangleSurface(TriangleSurface):
+    """A solid's mirrored TriangleSurface: before each force evaluation its CoupledSurface may renew the
+    partial gather's selection (every rank calls add_forces for every contributor at every step)."""
+
+    def __init__(self, *args, before_contacts=None, **options):
+        super().__init__(*args, **options)
+        self.before_contacts = before_contacts
+        # The partial gather's drift flag rides the step's one SUM over the ranks (local_totals) when carried.
+        self.carry_flag = False
+        self.flag = 0.0
+        self.summed_flag = 0.0
+
+    def add_forces(self, system, first: int, last: int):
+        if self.before_contacts is not None:
+            self.before_contacts(system)
+        return super().add_forces(system, first, last)
+
+    def local_totals(self) -> np.ndarray:
+        totals = super().local_totals()
+        return np.append(totals, self.flag) if self.carry_flag else totals
+
+    def take_summed_totals(self, summed: np.ndarray) -> None:
+        if self.carry_flag:
+            self.summed_flag = float(summed[-1])
+            summed = summed[:-1]
+        super().take_summed_totals(summed)
+
+    def mark_vertices_moved(self) -> None:
+        """Some vertices were written in place (set_vertices' bookkeeping without the copy)."""
+        self._bvh_current = False
+        self._vertices_moved = True
+
+
 class CoupledSurface(kinds.StateComponent):
+    # Tests switch the partial gather off to compare with the whole one.
+    partial_gather = True
+
     def __init__(self, solid, material_index: int, smooth_angle: float = 1.0, skin=None, blended: bool = False):
         self.solid = solid
         self.name = solid.name
@@ -51,10 +101,23 @@ class CoupledSurface(kinds.StateComponent):
         self.quadratic = solid.config.element == "P2"
         self.parent_faces = parent_faces_from_split(self.triangles) if self.quadratic else None
         _, positions, velocities = solid.surface_state()
-        self.triangle_surface = TriangleSurface(self.name, positions, self.triangles, material_index,
-                                                velocities=velocities, smooth_angle=smooth_angle, skin=skin,
-                                                blended=blended, work_of_transport_only=True,
-                                                transport_velocity=solid.config.transport_velocity)
+        self.triangle_surface = SolidTriangleSurface(self.name, positions, self.triangles, material_index,
+                                                     velocities=velocities, smooth_angle=smooth_angle, skin=skin,
+                                                     blended=blended, work_of_transport_only=True,
+                                                     transport_velocity=solid.config.transport_velocity,
+                                                     before_contacts=self._before_contacts)
+        # Partial gather (module docstring): off until the simulation allows it.
+        self._partial = False
+        self.selection = None          # selection.SurfaceSelection; None: the whole surface is gathered
+        self.selections = 0            # how many were made (tests, benchmarks)
+        self._stale = False            # some vertices hold an older state than the solid's (partial refreshes)
+        self._seen_build = None        # the particles' positions_at_build array of the last list build seen
+        self._region = None
+        self._reach = 0.0
+        self._margin = 0.0
+        self._last_interval = None
+        self._displacement_before = None
+        self._positions_before = None
         self.node_forces = np.zeros((len(self.node_indices), 3))
         # Forces summed over the DEM steps since the last FE advance (sub-cycling).
         self.accumulated_forces = np.zeros_like(self.node_forces)
@@ -155,6 +218,10 @@ class CoupledSurface(kinds.StateComponent):
     # ------------------------------------------------------------ heat
     def refresh_temperatures(self) -> None:
         """Collective: the solid's nodal temperatures onto the surface vertices."""
+        if self.selection is not None:
+            rows = self.selection.rows
+            self.triangle_surface.vertex_temperatures[rows] = self.selection.gather.scalar(self.solid.temperature_vec)
+            return
         surface = self.solid.contact_surface()
         self.triangle_surface.set_temperature(surface.gather_scalar(self.solid.temperature_vec))
 
@@ -243,7 +310,9 @@ class CoupledSurface(kinds.StateComponent):
         return total, self.checkpoint_records(comm), heat
 
     def state_dict(self) -> dict:
-        """Collective: the sub-cycling window so far (the surface's vertices are the wall's state)."""
+        """Collective: the sub-cycling window so far (the surface's vertices are the wall's state: written
+        as one array for all ranks, so the whole surface is brought back first)."""
+        self._refresh_whole()
         total, records, heat = self._window_sums(self.solid.comm)
         state = {"accumulated_forces": kinds.global_array(total), "damper_records": kinds.global_array(records)}
         if self.conducting:
@@ -309,8 +378,14 @@ class CoupledSurface(kinds.StateComponent):
         return pending
 
     def canonicalize(self) -> None:
-        """Collective: the window's sums moved to rank 0, as a restart has them."""
+        """Collective: the window's sums moved to rank 0, as a restart has them; the whole surface current and
+        no selection (derived state: the next force evaluation selects anew, as after a restart)."""
         comm = self.solid.comm
+        self._refresh_whole()
+        self.selection = None
+        self._seen_build = None
+        self.triangle_surface.flag = 0.0
+        self.triangle_surface.summed_flag = 0.0
         total, records, heat = self._window_sums(comm)
         self.accumulated_forces[:] = total if comm.rank == 0 else 0.0
         if self.frame is not None and self._pending_forces is not None:
@@ -323,6 +398,11 @@ class CoupledSurface(kinds.StateComponent):
     def remember_positions(self) -> None:
         """Keep the mirrored positions before an advance (for the mean surface velocity over it)."""
         self._positions_before = self.triangle_surface.vertices.copy()
+        if self._partial:
+            # The displacement before the advance, for the whole surface's chord velocities (_refresh_whole).
+            if self._displacement_before is None:
+                self._displacement_before = self.solid.displacement_vec.duplicate()
+            self.solid.displacement_vec.copy(self._displacement_before)
         if self.frame is not None:
             self._body_before = self._body_positions.copy()
             self._time_before = self.solid.time
@@ -334,10 +414,87 @@ class CoupledSurface(kinds.StateComponent):
         if self.frame is not None:
             self._refresh_moving_frame(interval)
             return
-        _, positions, velocities = self.solid.surface_state()
-        if interval is not None and getattr(self, "_positions_before", None) is not None:
-            velocities = (positions - self._positions_before) / interval
+        self._last_interval = interval if self._positions_before is not None else None
+        if self.selection is None or interval is None:
+            self._stale = True  # gathered whole just below
+            self._refresh_whole()
+            return
+        surface = self.triangle_surface
+        if surface.summed_flag > 0.0:
+            # A rank's surface nodes drifted beyond a quarter margin after an earlier advance (every rank has the
+            # same summed flag): all select anew.
+            self._stale = True
+            self._refresh_whole()
+            self._select(self._region)
+            return
+        # The vertices stand where remember_positions found them: their rows are the positions before the advance.
+        contact = self.solid.contact_surface()
+        displacements, velocities = self.selection.gather.pair_views(self.solid.displacement_vec,
+                                                                     self.solid.velocity_vec)
+        chosen.refresh_rows(self.selection.rows, contact.reference_positions, displacements, velocities,
+                            -1.0 if self._last_interval is None else float(self._last_interval),
+                            surface.vertices, surface.vertex_velocities)
+        surface.mark_vertices_moved()
+        self._stale = True
+        drift = self.selection.drift(contact.local_values(self.solid.displacement_vec), contact.owned_local_rows)
+        surface.flag = 1.0 if drift > 0.25 * self._margin else 0.0
+
+    # ------------------------------------------------------------ partial gather
+    def allow_partial_gather(self, allowed: bool = True) -> None:
+        """Called by the simulation (every rank alike): whether this surface may gather only the part near each
+        rank's particles (module docstring); never on one rank or for a solid with motion."""
+        self._partial = (bool(allowed) and type(self).partial_gather and self.solid.comm.size > 1
+                         and self.frame is None)
+        self.triangle_surface.carry_flag = self._partial
+
+    def _before_contacts(self, system) -> None:
+        """Collective (every rank, before the surface's contacts of every step): after a list build, the
+        selection is made anew when any rank's particle region left the one its selection covers."""
+        if not self._partial:
+            return
+        state = system.state
+        if state.positions_at_build is self._seen_build:  # no list build since the last look
+            return
+        self._seen_build = state.positions_at_build
+        self._region = chosen.particle_region(state.positions_at_build[:state.owned_count], system.skin)
+        self._margin = chosen.MARGIN_RADII * system.largest_radius
+        self._reach = system.largest_radius + float(system.tables.cohesion_reach) + self._margin
+        outside = self.selection is None or not chosen.region_within(self._region, self.selection.region,
+                                                                        0.5 * self._margin)
+        # One reduction per list build (a step that migrates particles and exchanges ghosts anyway).
+        flag = np.array([1.0 if outside else 0.0])
+        self.solid.comm.Allreduce(MPI.IN_PLACE, flag, op=MPI.MAX)
+        if flag[0] > 0.0:
+            self._refresh_whole()
+            self._select(self._region)
+
+    def _select(self, region) -> None:
+        """Collective, with the whole surface current: a new selection for this rank's particle region."""
+        contact = self.solid.contact_surface()
+        rows = chosen.rows_near(self.triangle_surface.vertices, self.triangles, region, self._reach)
+        self.selection = chosen.SurfaceSelection(contact.select(rows), region,
+                                                 contact.owned_values(self.solid.displacement_vec))
+        self.selections += 1
+        self.triangle_surface.flag = 0.0
+        self.triangle_surface.summed_flag = 0.0
+
+    def _refresh_whole(self) -> None:
+        """Collective (the same on every rank: _stale is): bring every vertex to the solid's current state as
+        the last refresh computed it (positions, the chord velocities over the last advance, temperatures)."""
+        if not self._stale:
+            return
+        contact = self.solid.contact_surface()
+        positions, velocities = contact.gather(self.solid.displacement_vec, self.solid.velocity_vec)
+        if self._last_interval is not None:
+            # The positions before the advance as the previous refresh computed them: X + u before.
+            before = (contact.reference_positions + contact.whole.vector(self._displacement_before)
+                      if self._displacement_before is not None and self.selection is not None
+                      else self._positions_before)
+            velocities = (positions - before) / self._last_interval
         self.triangle_surface.set_vertices(positions, velocities)
+        if self.conducting and self.selection is not None:
+            self.triangle_surface.set_temperature(contact.gather_scalar(self.solid.temperature_vec))
+        self._stale = False
 
     def _refresh_moving_frame(self, interval) -> None:
         """refresh_vertices of a solid with motion: world positions, the chord velocities split into the
