@@ -91,9 +91,10 @@ def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.nd
         position = np.minimum(np.searchsorted(sorted_ids, owners), len(sorted_ids) - 1)
         moving_records = sorted_ids[position] == owners
         record_destinations = destinations[leaving][order][position[moving_records]].astype(np.int64)
-    staying = np.ones(state.owned_count, dtype=bool)
-    staying[leaving] = False
-    state.keep(np.flatnonzero(staying))
+    if len(leaving):  # most rebuilds move few particles, many none: then no array is copied
+        staying = np.ones(state.owned_count, dtype=bool)
+        staying[leaving] = False
+        state.keep(np.flatnonzero(staying))
     incoming = _alltoallv_rows(comm, packed, destinations[leaving].astype(np.int64), width)
     state.append_rows(incoming, layout, as_ghosts=False)
     any_moving = bool(moving_records.any())

@@ -192,8 +192,11 @@ class ParticleState(kinds.StateComponent):
         self.owned_count = len(rows)
 
     def drop_ghosts(self) -> None:
+        # The owned rows lead every array: a slice of them is a contiguous view, no copy (the next append
+        # makes fresh arrays).
         if self.ghost_count:
-            self.keep(np.arange(self.owned_count))
+            for name, values in self._all_arrays():
+                self._set(name, values[:self.owned_count])
 
     def layout(self, flag: str):
         """([(name, first column, columns, tail shape, dtype)], width) of the fields with `flag`
@@ -222,6 +225,8 @@ class ParticleState(kinds.StateComponent):
     def append_rows(self, packed: np.ndarray, layout, as_ghosts: bool) -> None:
         """Append unpacked rows; fields not in the layout get zeros."""
         count = len(packed)
+        if count == 0:
+            return  # nothing arrived: keep the arrays as they are (a concatenation would copy every one)
         given = {name for name, *_ in layout}
         for name, start, columns, tail, dtype in layout:
             new = packed[:, start:start + columns].reshape((count, *tail))

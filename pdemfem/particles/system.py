@@ -35,6 +35,7 @@ import logging
 import math
 
 import numpy as np
+from numba import njit
 from mpi4py import MPI
 
 from pdemfem.contact import layout
@@ -352,13 +353,10 @@ class ParticleSystem(kinds.StateComponent):
         contacts and did most of the work."""
         state = self.state
         costs = np.full(state.count, PARTICLE_COST)
-        if self.neighbors.pair_count and len(self.neighbors.row_particles) == state.count:
-            first, second = self.neighbors.pair_rows()
-            gap = state.radii[first] + state.radii[second]
-            touching = np.einsum("ij,ij->i", *(2 * [state.positions[first] - state.positions[second]])) < gap * gap
-            weights = 1.0 + CONTACT_COST * touching
-            costs += np.bincount(first, weights=weights, minlength=state.count)
-            costs += np.bincount(second, weights=weights, minlength=state.count)
+        neighbors = self.neighbors
+        if neighbors.pair_count and len(neighbors.row_particles) == state.count:
+            add_pair_costs(neighbors.row_particles, neighbors.offsets, neighbors.partners, state.positions,
+                           state.radii, CONTACT_COST, costs)
         return costs[:state.owned_count]
 
     def _rows_per_particle(self) -> np.ndarray:
@@ -504,3 +502,20 @@ class ParticleSystem(kinds.StateComponent):
             "dissipated_energy": self.dissipated_energy,
             "wall_work": self.walls.work,
         }
+
+
+@njit(cache=True)
+def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_cost, costs):
+    """costs[i] and costs[j] += 1 + contact_cost x touching, for every listed pair (i, j): one pass over the
+    list (numpy's version materialised six pair-length arrays at every rebuild on several ranks)."""
+    for r in range(row_particles.shape[0]):
+        i = row_particles[r]
+        for row in range(offsets[r], offsets[r + 1]):
+            j = partners[row]
+            dx = positions[i, 0] - positions[j, 0]
+            dy = positions[i, 1] - positions[j, 1]
+            dz = positions[i, 2] - positions[j, 2]
+            gap = radii[i] + radii[j]
+            weight = 1.0 + contact_cost if dx * dx + dy * dy + dz * dz < gap * gap else 1.0
+            costs[i] += weight
+            costs[j] += weight
