@@ -215,10 +215,17 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
         if overlap > deepest * radius:
             deepest = overlap / radius
         # Contact point on the plane, `distance` below the centre.
-        fx, fy, fz, _, _, _, elastic, dissipated, _, _ = rigid_wall_contact(
-            composition, i, nx, ny, nz, distance, wall_velocities[w, 0], wall_velocities[w, 1],
-            wall_velocities[w, 2], wall_material[w], history, row, velocities, angular_velocities, radii, mass,
-            inverse_inertia, material_index, coefficients, dt, forces, torques)
+        fx, fy, fz, tx, ty, tz, _, _, _, elastic, dissipated, _, _ = rigid_wall_contact(
+            composition, coefficients, material_index[i], wall_material[w], nx, ny, nz, distance,
+            wall_velocities[w, 0], wall_velocities[w, 1], wall_velocities[w, 2], velocities[i, 0], velocities[i, 1],
+            velocities[i, 2], angular_velocities[i, 0], angular_velocities[i, 1], angular_velocities[i, 2], radius,
+            mass[i], inverse_inertia[i], history, row, dt)
+        forces[i, 0] += fx
+        forces[i, 1] += fy
+        forces[i, 2] += fz
+        torques[i, 0] += tx
+        torques[i, 1] += ty
+        torques[i, 2] += tz
         elastic_total += elastic
         dissipated_total += dissipated
         contacts += 1

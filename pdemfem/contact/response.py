@@ -143,36 +143,32 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
 
 
 @njit(inline="always", cache=True)
-def rigid_wall_contact(composition, i, nx, ny, nz, distance, surface_vx, surface_vy, surface_vz, wall_row,
-                       history, slot, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
-                       coefficients, dt, forces, torques):
-    """Contact of particle i with a rigid wall (R = inf, m = inf): plane, cylinder or triangle.
+def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz, distance, surface_vx, surface_vy,
+                       surface_vz, vx, vy, vz, wx, wy, wz, radius, mass, inverse_inertia, history, slot, dt):
+    """Contact of a particle (velocity v, spin w, radius, mass, inverse inertia; scalars) with a rigid wall
+    (R = inf, m = inf): plane, cylinder or triangle.
 
-    n is the wall's normal at the contact point, which lies `distance` below the centre
-    along -n and moves with the surface velocity.  Adds the force and torque to particle i
-    and returns (fx, fy, fz, mx, my, mz, elastic, dissipated, c_n, c_t): the force and rolling couple
-    on the particle (the wall gets the opposite), the contact's energies and its dashpot coefficients.
+    n is the wall's normal at the contact point, which lies `distance` below the centre along -n and moves
+    with the surface velocity.  Returns (fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, c_n, c_t):
+    the force on the particle (the wall gets the opposite), its torque about the particle's centre (the
+    force's moment and the rolling couple), the rolling couple alone, the contact's energies and its dashpot
+    coefficients.  The caller adds force and torque to the particle's rows: an inlined helper that takes the
+    particle arrays costs their reference counts on every call (the plane-wall kernel took twice as long).
     """
     lever = distance
-    wx = angular_velocities[i, 0]
-    wy = angular_velocities[i, 1]
-    wz = angular_velocities[i, 2]
-    vx = velocities[i, 0] - surface_vx - lever * (wy * nz - wz * ny)
-    vy = velocities[i, 1] - surface_vy - lever * (wz * nx - wx * nz)
-    vz = velocities[i, 2] - surface_vz - lever * (wx * ny - wy * nx)
+    relative_x = vx - surface_vx - lever * (wy * nz - wz * ny)
+    relative_y = vy - surface_vy - lever * (wz * nx - wx * nz)
+    relative_z = vz - surface_vz - lever * (wx * ny - wy * nx)
     effective_inertia = 0.0  # only rolling models use it
     if composition & ROLLING_ANY:
-        effective_inertia = 1.0 / inverse_inertia[i]
+        effective_inertia = 1.0 / inverse_inertia
     fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = contact_response(
-        composition, coefficients, material_index[i], wall_row, nx, ny, nz, radii[i] - distance, vx, vy, vz,
-        wx, wy, wz, mass[i], radii[i], effective_inertia, history, slot, dt)
-    forces[i, 0] += fx
-    forces[i, 1] += fy
-    forces[i, 2] += fz
-    torques[i, 0] += -lever * (ny * fz - nz * fy) + mx
-    torques[i, 1] += -lever * (nz * fx - nx * fz) + my
-    torques[i, 2] += -lever * (nx * fy - ny * fx) + mz
-    return fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping
+        composition, coefficients, material, wall_row, nx, ny, nz, radius - distance, relative_x, relative_y,
+        relative_z, wx, wy, wz, mass, radius, effective_inertia, history, slot, dt)
+    tx = -lever * (ny * fz - nz * fy) + mx
+    ty = -lever * (nz * fx - nx * fz) + my
+    tz = -lever * (nx * fy - ny * fx) + mz
+    return fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping
 
 
 @njit(cache=True)

@@ -102,9 +102,16 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         sx = velocity[0] + angular_velocity[1] * az - angular_velocity[2] * ay
         sy = velocity[1] + angular_velocity[2] * ax - angular_velocity[0] * az
         sz = velocity[2] + angular_velocity[0] * ay - angular_velocity[1] * ax
-        fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = rigid_wall_contact(
-            composition, i, nx, ny, nz, distance, sx, sy, sz, wall_row, rows, i, velocities,
-            angular_velocities, radii, mass, inverse_inertia, material_index, coefficients, dt, forces, torques)
+        fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, _, _ = rigid_wall_contact(
+            composition, coefficients, material_index[i], wall_row, nx, ny, nz, distance, sx, sy, sz,
+            velocities[i, 0], velocities[i, 1], velocities[i, 2], angular_velocities[i, 0], angular_velocities[i, 1],
+            angular_velocities[i, 2], radius, mass[i], inverse_inertia[i], rows, i, dt)
+        forces[i, 0] += fx
+        forces[i, 1] += fy
+        forces[i, 2] += fz
+        torques[i, 0] += tx
+        torques[i, 1] += ty
+        torques[i, 2] += tz
         rows[i, overlap_column] = radius - distance  # this step's overlap
         elastic_total += elastic
         dissipated_total += dissipated

@@ -556,9 +556,17 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
             sx += transport_velocity[0] - along * nx
             sy += transport_velocity[1] - along * ny
             sz += transport_velocity[2] - along * nz
-            fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = rigid_wall_contact(
-                composition, i, nx, ny, nz, distance, sx, sy, sz, wall_material, history, slot, velocities,
-                angular_velocities, radii, mass, inverse_inertia, material_index, coefficients, dt, forces, torques)
+            fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = (
+                rigid_wall_contact(composition, coefficients, material_index[i], wall_material, nx, ny, nz, distance,
+                                   sx, sy, sz, velocities[i, 0], velocities[i, 1], velocities[i, 2],
+                                   angular_velocities[i, 0], angular_velocities[i, 1], angular_velocities[i, 2],
+                                   radius, mass[i], inverse_inertia[i], history, slot, dt))
+            forces[i, 0] += fx
+            forces[i, 1] += fy
+            forces[i, 2] += fz
+            torques[i, 0] += tx
+            torques[i, 1] += ty
+            torques[i, 2] += tz
             if blend_applied:
                 # Split the force: the normal elastic part f_el n acts as the blended potential's gradient (on the
                 # particle f_el |grad delta| n, on the nodes -f_el d delta/d x_k); the dashpot and tangential
