@@ -15,8 +15,8 @@ from numba import njit
 from pdemfem.contact.conduction import contact_conductance
 from pdemfem.contact.layout import COHESIVE, HEAT, ROLLING_ANY
 from pdemfem.contact.registry import history_layout
-from pdemfem.contact.response import (clear_history, cohesive_contact_holds, contact_response, released_energy,
-                                      rigid_wall_contact)
+from pdemfem.contact.response import (add_particle_loads, clear_history, cohesive_contact_holds, contact_response,
+                                      released_energy, rigid_wall_contact)
 
 
 @njit(cache=True)
@@ -220,12 +220,7 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
             wall_velocities[w, 0], wall_velocities[w, 1], wall_velocities[w, 2], velocities[i, 0], velocities[i, 1],
             velocities[i, 2], angular_velocities[i, 0], angular_velocities[i, 1], angular_velocities[i, 2], radius,
             mass[i], inverse_inertia[i], history, row, dt)
-        forces[i, 0] += fx
-        forces[i, 1] += fy
-        forces[i, 2] += fz
-        torques[i, 0] += tx
-        torques[i, 1] += ty
-        torques[i, 2] += tz
+        add_particle_loads(forces, torques, i, fx, fy, fz, tx, ty, tz)
         elastic_total += elastic
         dissipated_total += dissipated
         contacts += 1

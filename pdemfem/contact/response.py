@@ -152,8 +152,8 @@ def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz
     with the surface velocity.  Returns (fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, c_n, c_t):
     the force on the particle (the wall gets the opposite), its torque about the particle's centre (the
     force's moment and the rolling couple), the rolling couple alone, the contact's energies and its dashpot
-    coefficients.  The caller adds force and torque to the particle's rows: an inlined helper that takes the
-    particle arrays costs their reference counts on every call (the plane-wall kernel took twice as long).
+    coefficients.  The caller adds force and torque to the particle's rows (add_particle_loads): with the
+    particle's ten arrays passed in instead, the plane-wall kernel took twice as long.
     """
     lever = distance
     relative_x = vx - surface_vx - lever * (wy * nz - wz * ny)
@@ -169,6 +169,18 @@ def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz
     ty = -lever * (nz * fx - nx * fz) + my
     tz = -lever * (nx * fy - ny * fx) + mz
     return fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping
+
+
+@njit(inline="always", cache=True)
+def add_particle_loads(forces, torques, i, fx, fy, fz, tx, ty, tz):
+    """Add a contact's force and torque to particle i's rows (what rigid_wall_contact returns).  Taking
+    the two load arrays costs nothing measurable; the ten particle arrays the wall helper once took did."""
+    forces[i, 0] += fx
+    forces[i, 1] += fy
+    forces[i, 2] += fz
+    torques[i, 0] += tx
+    torques[i, 1] += ty
+    torques[i, 2] += tz
 
 
 @njit(cache=True)

@@ -24,7 +24,8 @@ from numba import njit
 from pdemfem import state_dict as kinds
 from pdemfem.contact.conduction import contact_conductance
 from pdemfem.contact.layout import COHESIVE, HEAT
-from pdemfem.contact.response import cohesive_contact_holds, released_energy, rigid_wall_contact
+from pdemfem.contact.response import (add_particle_loads, cohesive_contact_holds, released_energy,
+                                      rigid_wall_contact)
 from pdemfem.walls.base import ContributorWall, rotation_matrix
 
 
@@ -106,12 +107,7 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
             composition, coefficients, material_index[i], wall_row, nx, ny, nz, distance, sx, sy, sz,
             velocities[i, 0], velocities[i, 1], velocities[i, 2], angular_velocities[i, 0], angular_velocities[i, 1],
             angular_velocities[i, 2], radius, mass[i], inverse_inertia[i], rows, i, dt)
-        forces[i, 0] += fx
-        forces[i, 1] += fy
-        forces[i, 2] += fz
-        torques[i, 0] += tx
-        torques[i, 1] += ty
-        torques[i, 2] += tz
+        add_particle_loads(forces, torques, i, fx, fy, fz, tx, ty, tz)
         rows[i, overlap_column] = radius - distance  # this step's overlap
         elastic_total += elastic
         dissipated_total += dissipated

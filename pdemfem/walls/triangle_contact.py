@@ -54,7 +54,8 @@ from numba import njit
 from pdemfem.contact.conduction import contact_conductance
 from pdemfem.contact.layout import HEAT
 from pdemfem.contact.registry import history_layout
-from pdemfem.contact.response import (history_in_use, pull_off_overlap, released_energy, rigid_wall_contact)
+from pdemfem.contact.response import (add_particle_loads, history_in_use, pull_off_overlap, released_energy,
+                                      rigid_wall_contact)
 
 REGION_FACE = 0
 REGION_EDGE_AB = 1
@@ -561,12 +562,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                                    sx, sy, sz, velocities[i, 0], velocities[i, 1], velocities[i, 2],
                                    angular_velocities[i, 0], angular_velocities[i, 1], angular_velocities[i, 2],
                                    radius, mass[i], inverse_inertia[i], history, slot, dt))
-            forces[i, 0] += fx
-            forces[i, 1] += fy
-            forces[i, 2] += fz
-            torques[i, 0] += tx
-            torques[i, 1] += ty
-            torques[i, 2] += tz
+            add_particle_loads(forces, torques, i, fx, fy, fz, tx, ty, tz)
             if blend_applied:
                 # Split the force: the normal elastic part f_el n acts as the blended potential's gradient (on the
                 # particle f_el |grad delta| n, on the nodes -f_el d delta/d x_k); the dashpot and tangential
