@@ -43,7 +43,7 @@ from pdemfem.clumps.rigid_body import (angular_momenta_from_velocities, angular_
                                        body_rotations, kick_bodies_and_spin, kick_drift_bodies, member_levers,
                                        move_members, place_members, rotational_energies, sum_row_loads)
 from pdemfem.particles.energy import particle_energy_sums
-from pdemfem.particles.integrate import keep_largest
+from pdemfem.particles.integrate import keep_largest, kick_drift_row
 
 BODY_FIELD = "clump_body"
 OFFSET_FIELD = "clump_offset"
@@ -62,17 +62,9 @@ def kick_drift_free_spheres(owned_count, body, positions, velocities, angular_ve
                 forces[i, axis] = 0.0
                 torques[i, axis] = 0.0
             continue
-        displacement_squared = 0.0
-        for axis in range(3):
-            velocity = velocities[i, axis] + half_dt * (forces[i, axis] * inverse_mass[i] + gravity[axis])
-            velocities[i, axis] = velocity
-            angular_velocities[i, axis] += half_dt * torques[i, axis] * inverse_inertia[i]
-            forces[i, axis] = 0.0
-            torques[i, axis] = 0.0
-            positions[i, axis] += dt * velocity
-            offset = positions[i, axis] - positions_at_build[i, axis]
-            displacement_squared += offset * offset
-        largest = keep_largest(largest, displacement_squared)
+        largest = keep_largest(largest, kick_drift_row(i, positions, velocities, angular_velocities, forces, torques,
+                                                       inverse_mass, inverse_inertia, gravity, half_dt, dt,
+                                                       positions_at_build))
     return largest
 
 

