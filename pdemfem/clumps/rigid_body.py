@@ -291,6 +291,20 @@ def member_levers(member_count, member_body, member_offsets, rotations, levers):
                                + rotations[b, axis, 2] * member_offsets[m, 2])
 
 
+@njit(inline="always", cache=True)
+def _set_member_motion(i, b, m, levers, body_velocities, body_angular_velocities, velocities, angular_velocities):
+    """Member row i of body b (lever row m): the body's velocity at the member's centre, and its spin."""
+    w0 = body_angular_velocities[b, 0]
+    w1 = body_angular_velocities[b, 1]
+    w2 = body_angular_velocities[b, 2]
+    velocities[i, 0], velocities[i, 1], velocities[i, 2] = _member_velocity(
+        body_velocities[b, 0], body_velocities[b, 1], body_velocities[b, 2], w0, w1, w2, levers[m, 0],
+        levers[m, 1], levers[m, 2])
+    angular_velocities[i, 0] = w0
+    angular_velocities[i, 1] = w1
+    angular_velocities[i, 2] = w2
+
+
 @njit(cache=True)
 def place_members(rows, member_body, member_offsets, rotations, body_positions, body_velocities,
                   body_angular_velocities, levers, positions, velocities, angular_velocities, positions_at_build):
@@ -313,15 +327,7 @@ def place_members(rows, member_body, member_offsets, rotations, body_positions, 
             offset = positions[i, axis] - positions_at_build[i, axis]
             displacement_squared += offset * offset
         largest = keep_largest(largest, displacement_squared)
-        w0 = body_angular_velocities[b, 0]
-        w1 = body_angular_velocities[b, 1]
-        w2 = body_angular_velocities[b, 2]
-        velocities[i, 0], velocities[i, 1], velocities[i, 2] = _member_velocity(
-            body_velocities[b, 0], body_velocities[b, 1], body_velocities[b, 2], w0, w1, w2, levers[m, 0],
-            levers[m, 1], levers[m, 2])
-        angular_velocities[i, 0] = w0
-        angular_velocities[i, 1] = w1
-        angular_velocities[i, 2] = w2
+        _set_member_motion(i, b, m, levers, body_velocities, body_angular_velocities, velocities, angular_velocities)
     return largest
 
 
@@ -331,15 +337,7 @@ def move_members(rows, member_body, levers, body_velocities, body_angular_veloci
     for m in range(rows.shape[0]):
         b = member_body[m]
         i = rows[m]
-        w0 = body_angular_velocities[b, 0]
-        w1 = body_angular_velocities[b, 1]
-        w2 = body_angular_velocities[b, 2]
-        velocities[i, 0], velocities[i, 1], velocities[i, 2] = _member_velocity(
-            body_velocities[b, 0], body_velocities[b, 1], body_velocities[b, 2], w0, w1, w2, levers[m, 0],
-            levers[m, 1], levers[m, 2])
-        angular_velocities[i, 0] = w0
-        angular_velocities[i, 1] = w1
-        angular_velocities[i, 2] = w2
+        _set_member_motion(i, b, m, levers, body_velocities, body_angular_velocities, velocities, angular_velocities)
 
 
 @njit(cache=True)
