@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from collections import defaultdict
 from pathlib import Path
 
 import pdemfem  # noqa: F401  (environment first)
@@ -36,20 +35,7 @@ from pdemfem.fem.solid import Solid
 from pdemfem.walls.mesh import TriangleSurface
 
 HERE = Path(__file__).resolve().parent
-TIMES = defaultdict(float)
-
-
-def wrap(cls, name, label):
-    original = getattr(cls, name)
-
-    def timed(*args, **kwargs):
-        start = time.perf_counter()
-        try:
-            return original(*args, **kwargs)
-        finally:
-            TIMES[label] += time.perf_counter() - start
-
-    setattr(cls, name, timed)
+from method_timers import TIMES, wrap  # noqa: E402  (benchmarks/method_timers.py)
 
 
 def scene(particles: int, cells):

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from collections import defaultdict
 
 import numpy as np
 
@@ -32,22 +31,7 @@ from pdemfem import Simulation
 from pdemfem.coupling.surface import CoupledSurface
 from pdemfem.fem.surface import NodeGather
 
-TIMES = defaultdict(float)
-CALLS = defaultdict(int)
-
-
-def wrap(cls, name, label):
-    original = getattr(cls, name)
-
-    def timed(*args, **kwargs):
-        start = time.perf_counter()
-        try:
-            return original(*args, **kwargs)
-        finally:
-            TIMES[label] += time.perf_counter() - start
-            CALLS[label] += 1
-
-    setattr(cls, name, timed)
+from method_timers import CALLS, TIMES, wrap  # noqa: E402  (benchmarks/method_timers.py)
 
 
 def scene(cells: int, cover: float, count: int) -> dict:
