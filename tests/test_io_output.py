@@ -144,3 +144,34 @@ def test_write_atomic_replaces_whole_file(tmp_path):
     xdmf.write_atomic(target, "two")
     assert target.read_text() == "two"
     assert [p.name for p in tmp_path.iterdir()] == ["a.xdmf"]
+
+
+def test_a_solid_output_killed_mid_write_is_set_aside_on_restart(tmp_path, caplog):
+    """A run killed while writing <solid>.h5 leaves it unreadable (HDF5 is not crash-safe); the restart
+    from its checkpoint moved it to .previous and stopped with an error before ("does not hold this
+    mesh"), so the checkpoint could not be used.  Now, as particles.h5 is: the file goes to
+    .unreadable, a new one with the mesh is started, and the series goes on."""
+    from mpi4py import MPI
+
+    from pdemfem.io.solid_output import SolidOutput
+
+    points, cells = io_data.box_tet_mesh()
+    nodal = {"displacements": np.zeros((len(points), 3))}
+    output = SolidOutput(tmp_path, "block", MPI.COMM_SELF, points, cells, 0)
+    output.write(0.0, 0, point_data=nodal)
+    output.write(1.0e-3, 10, point_data=nodal)
+    path = tmp_path / "block.h5"
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 3])  # cut short, as a kill in the middle of a write leaves it
+    with caplog.at_level("WARNING", logger="pdemfem"):
+        resumed = SolidOutput(tmp_path, "block", MPI.COMM_SELF, points, cells, 0, resume_step=10)
+    assert (tmp_path / "block.h5.unreadable").read_bytes() == data[: len(data) // 3]
+    assert any("was unreadable" in record.getMessage() for record in caplog.records)
+    resumed.write(2.0e-3, 20, point_data=nodal)
+    with h5py.File(path, "r") as handle:
+        assert handle["mesh/points"].shape == (len(points), 3) and handle["mesh/cells"].shape == (len(cells), 4)
+        assert [key for key in handle if key.startswith("step_")] == ["step_0000000020"]
+    # A readable file of another mesh is still refused (a different scene must not append to it).
+    other_points = np.vstack([points, points[:1] + 1.0])
+    with pytest.raises(ValueError, match="does not hold this mesh"):
+        SolidOutput(tmp_path, "block", MPI.COMM_SELF, other_points, cells, 0, resume_step=20)

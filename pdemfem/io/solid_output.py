@@ -24,12 +24,15 @@ ParaView's "Warp By Vector" with ``displacements`` to draw the deformed solid.
 """
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from pdemfem.io import xdmf
 from pdemfem.io.particle_output import step_group
+
+log = logging.getLogger("pdemfem")
 
 
 class SolidOutput:
@@ -69,15 +72,15 @@ class SolidOutput:
         if len(cells) and (cells.min() < 0 or cells.max() >= self.total_nodes):
             raise ValueError(f"solid output {name}: cell node numbers outside 0..{self.total_nodes - 1}")
         self._entries: list[dict] = []
-        if resume_step is None or not self.h5_path.exists():
+        # A restart resumes the file; one killed mid-write (unreadable) is moved aside and started anew, as
+        # particles.h5 is: the run goes on from its checkpoint and the lost output steps are named in the log.
+        if resume_step is None or not self.h5_path.exists() or not self._resume(int(resume_step)):
             with xdmf.open_parallel(self.h5_path, "w", comm) as handle:
                 mesh = handle.create_group("mesh")
                 xdmf.write_slab(mesh.create_dataset("points", (self.total_nodes, 3), np.float64),
                                 self.node_offset, points)
                 xdmf.write_slab(mesh.create_dataset("cells", (self.total_cells, 4), np.int64),
                                 self.cell_offset, cells)
-        else:
-            self._resume(int(resume_step))
         if comm.rank == 0:
             xdmf.write_atomic(self.xdmf_path, self._document())
 
@@ -117,7 +120,9 @@ class SolidOutput:
     def close(self) -> None:
         """Nothing stays open between writes."""
 
-    def _resume(self, resume_step: int) -> None:
+    def _resume(self, resume_step: int) -> bool:
+        """Collective: keep the file's steps up to resume_step; False when it was unreadable (moved aside to
+        <name>.h5.unreadable: the caller starts a new one).  A readable file of another mesh is an error."""
         import h5py
 
         state = None
@@ -138,9 +143,13 @@ class SolidOutput:
                                                           group[name].dtype) for name in group}})
                 state = {"ok": shape == (self.total_nodes, self.total_cells),
                          "entries": sorted(entries, key=lambda e: e["step"])}
-            except Exception:
-                state = {"ok": False, "entries": []}
-            if not state["ok"]:  # a different or unreadable mesh: keep the old file aside
+            except Exception:  # unreadable (e.g. killed mid-write): keep it for inspection, start anew
+                self.h5_path.replace(self.h5_path.with_name(self.h5_path.name + ".unreadable"))
+                log.warning("solid output %s: %s was unreadable (a run killed while writing it?); moved to "
+                            "%s.unreadable and started anew from the restart step", self.name, self.h5_path,
+                            self.h5_path.name)
+                state = {"ok": True, "unreadable": True, "entries": []}
+            if not state["ok"]:  # a different mesh: keep the old file aside
                 self.h5_path.replace(self.h5_path.with_name(self.h5_path.name + ".previous"))
         state = self.comm.bcast(state, root=0)
         if not state["ok"]:
@@ -148,6 +157,7 @@ class SolidOutput:
                              "it was moved to .previous, start without resume")
         if self.comm.rank == 0:
             self._entries = state["entries"]
+        return not state.get("unreadable", False)
 
     def _document(self) -> str:
         h5_name = self.h5_path.name
