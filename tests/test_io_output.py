@@ -175,3 +175,16 @@ def test_a_solid_output_killed_mid_write_is_set_aside_on_restart(tmp_path, caplo
     other_points = np.vstack([points, points[:1] + 1.0])
     with pytest.raises(ValueError, match="does not hold this mesh"):
         SolidOutput(tmp_path, "block", MPI.COMM_SELF, other_points, cells, 0, resume_step=20)
+
+
+def test_a_history_row_cut_short_by_a_kill_is_dropped_on_restart(tmp_path):
+    """history.csv keeps the header and the whole rows up to the restart step.  A last row cut inside its
+    step field ("0.012,12" of step 120) read as step 12 and was kept; one cut right after a comma raised
+    ValueError from float('') (a traceback on restart)."""
+    from pdemfem.io.simulation_io import _truncate_history
+
+    for cut in ("0.012,12", "0.012,", "0.012,120,3"):
+        path = tmp_path / "history.csv"
+        path.write_text("time,step,particles\n0.0,0,3\n0.001,10,3\n" + cut)
+        _truncate_history(path, 100)
+        assert path.read_text().splitlines() == ["time,step,particles", "0.0,0,3", "0.001,10,3"], cut

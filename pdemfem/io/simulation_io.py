@@ -316,7 +316,8 @@ def _truncate_history(path: Path, step: int) -> None:
         return
     header, body = rows[0], rows[1:]
     column = header.index("step") if "step" in header else None
-    kept = [row for row in body if column is None or (len(row) > column and int(float(row[column])) <= step)]
+    # A row cut short by a kill mid-write (fewer fields than the header) is dropped, not parsed.
+    kept = [row for row in body if len(row) == len(header) and (column is None or int(float(row[column])) <= step)]
     temporary = path.with_name(path.name + ".tmp")
     with open(temporary, "w", newline="") as handle:
         writer = csv.writer(handle)
