@@ -433,12 +433,14 @@ def _report(path, scene, base_dir, placed) -> tuple:
     lines.append(f"materials: {', '.join(scene.materials)}; contact models: {', '.join(models)}")
 
     rayleigh = derived.rayleigh_time(scene)
-    dt = derived.time_step(scene, base_dir=base_dir)
     from pdemfem.coupling.check import HELD_FORCE_MARGIN, build_solids, held_force_step_limit
 
+    # The solids are built once, here: for the step without particles, the held-force limit and the report.
     solids = build_solids(scene, base_dir) if scene.solids else None
+    solid_step = (min(solid.critical_time_step() for solid in solids.values())
+                  if solids and not scene.particles else None)
+    dt = derived.time_step(scene, solid_critical_step=solid_step)
     if scene.time.dt == "auto":
-        solid_step = dt if not scene.particles else None
         why = derived.time_step_choice(scene, solid_step)[1]
         held_limit, held_by = held_force_step_limit(scene, solids) if solids else (math.inf, None)
         if dt > HELD_FORCE_MARGIN * held_limit:  # as run does (Simulation): a yielding surface's node sets the step
@@ -477,7 +479,7 @@ def _report(path, scene, base_dir, placed) -> tuple:
             lines.append("heat: on (contact conduction" + (", solids conduct" if scene.solids else "") + ")" + (
                 f"; thermal step limit ~{thermal[0]:.3g} s ({thermal[1]}), dt is {dt / thermal[0]:.2g} of it"
                 if thermal is not None else ""))
-    found = derived.warnings(scene, solid_critical_step=dt if scene.solids and not scene.particles else None)
+    found = derived.warnings(scene, solid_critical_step=solid_step)
     if scene.solids:
         from pdemfem.coupling.check import coupling_report
 

@@ -279,7 +279,7 @@ def likely_causes(scene, dt: float, fastest: float, smallest_radius: float, thin
                 causes.append(f"tunnelling: {label} at {fastest:.3g} m/s overlaps {ratio:.2g} radii (the material is "
                               f"too soft for that speed: raise youngs_modulus or lower the speed)")
     if math.isfinite(fastest):
-        for ratio, kind, label in derived.contact_overlaps(scene, fastest):
+        for ratio, kind, label, _ in derived.contact_overlaps(scene, fastest):
             if ratio > 1.0 and kind == "particle_particle":
                 causes.append(f"contacts {label} at {fastest:.3g} m/s overlap {ratio:.2g} of the smaller radius (the "
                               f"material is too soft for that speed: raise youngs_modulus or lower the speed)")

@@ -143,17 +143,22 @@ def test_a_solid_geo_without_a_volume_says_to_define_one(tmp_path):
     assert "no volume cells" in caught.value.problem and "define the solid's volume in the .geo file" in caught.value.fix
 
 
-def test_a_bad_solid_geo_stops_the_run_with_exit_2_and_no_traceback(tmp_path, capsys):
-    from pdemfem import cli
-
-    _write(tmp_path, "broken.geo", "Point(1) = {0, 0, 0};\nLine(1) = {1, 2\n")
-    scene = _write(tmp_path, "scene.yaml", """\
+def _broken_solid_scene(folder):
+    """A scene whose solid is meshed from a .geo file with a syntax error."""
+    _write(folder, "broken.geo", "Point(1) = {0, 0, 0};\nLine(1) = {1, 2\n")
+    return _write(folder, "scene.yaml", """\
 time: {end: 0.001, dt: 1.0e-4}
 materials:
   steel: {density: 7800, youngs_modulus: 2.0e8, poisson_ratio: 0.3}
 solids:
   - {name: block, mesh: broken.geo, material: steel, fixed: [zmin]}
 """)
+
+
+def test_a_bad_solid_geo_stops_the_run_with_exit_2_and_no_traceback(tmp_path, capsys):
+    from pdemfem import cli
+
+    scene = _broken_solid_scene(tmp_path)
     code = cli.main(["run", str(scene), "--quiet", "-o", str(tmp_path / "out")])
     _, err = capsys.readouterr()
     assert code == 2, err
@@ -163,14 +168,7 @@ solids:
 
 @pytest.mark.mpi
 def test_a_bad_solid_geo_stops_both_ranks_together(tmp_path):
-    _write(tmp_path, "broken.geo", "Point(1) = {0, 0, 0};\nLine(1) = {1, 2\n")
-    scene = _write(tmp_path, "scene.yaml", """\
-time: {end: 0.001, dt: 1.0e-4}
-materials:
-  steel: {density: 7800, youngs_modulus: 2.0e8, poisson_ratio: 0.3}
-solids:
-  - {name: block, mesh: broken.geo, material: steel, fixed: [zmin]}
-""")
+    scene = _broken_solid_scene(tmp_path)
     ran = subprocess.run([sys.executable, "-m", "pdemfem.launch", "-n", "2", "--", sys.executable, "-m", "pdemfem.cli",
                           "run", str(scene), "--quiet", "-o", str(tmp_path / "out")],
                          capture_output=True, text=True, cwd=tmp_path, timeout=300)

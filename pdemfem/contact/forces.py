@@ -53,7 +53,8 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             dy = yi - positions[j, 1]
             dz = zi - positions[j, 2]
             distance_squared = dx * dx + dy * dy + dz * dz
-            radius_sum = radius_i + radii[j]
+            radius_j = radii[j]
+            radius_sum = radius_i + radius_j
             apart = distance_squared >= radius_sum * radius_sum
             if apart and width == 0:
                 continue
@@ -66,7 +67,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
                     # Most listed pairs are apart with an empty history.
                     continue
                 material_j = material_index[j]
-                effective_radius = radius_i * radii[j] / radius_sum
+                effective_radius = radius_i * radius_j / radius_sum
                 distance = math.sqrt(distance_squared)
                 # A formed cohesive contact holds down to its pull-off overlap.
                 if not (composition & COHESIVE) or not cohesive_contact_holds(
@@ -95,7 +96,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             else:
                 booked = ids[j] < ids[i]
             overlap = radius_sum - distance
-            smaller = radius_i if radius_i < radii[j] else radii[j]
+            smaller = radius_i if radius_i < radius_j else radius_j
             if overlap > deepest * smaller:  # divides only when the record grows
                 deepest = overlap / smaller
             inverse_distance = 1.0 / distance
@@ -103,7 +104,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             ny = dy * inverse_distance
             nz = dz * inverse_distance
             lever_i = radius_i - 0.5 * overlap
-            lever_j = radii[j] - 0.5 * overlap
+            lever_j = radius_j - 0.5 * overlap
             wxi = angular_velocities[i, 0]
             wyi = angular_velocities[i, 1]
             wzi = angular_velocities[i, 2]
@@ -118,7 +119,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
             vy = velocities[i, 1] - velocities[j, 1] - (sz * nx - sx * nz)
             vz = velocities[i, 2] - velocities[j, 2] - (sx * ny - sy * nx)
             effective_mass = mass[i] * mass[j] / (mass[i] + mass[j])
-            effective_radius = radius_i * radii[j] / radius_sum
+            effective_radius = radius_i * radius_j / radius_sum
             effective_inertia = 0.0  # only rolling models use it: a division saved per contact without them
             if composition & ROLLING_ANY:
                 effective_inertia = 1.0 / (inverse_inertia[i] + inverse_inertia[j])

@@ -181,3 +181,21 @@ def box_distance(points: np.ndarray, box_lower: np.ndarray, box_upper: np.ndarra
     above = np.maximum(points - box_upper, 0.0)
     gap = np.where(np.isfinite(below), below, 0.0) + np.where(np.isfinite(above), above, 0.0)
     return np.sqrt(np.sum(gap * gap, axis=-1))
+
+
+@njit(cache=True)
+def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_cost, costs):
+    """The bisection's particle weights from the neighbour list (ParticleSystem._particle_costs): costs[i] and
+    costs[j] += 1 + contact_cost x touching, for every listed pair (i, j), in one pass (numpy's version
+    materialised six pair-length arrays at every rebuild on several ranks)."""
+    for r in range(row_particles.shape[0]):
+        i = row_particles[r]
+        for row in range(offsets[r], offsets[r + 1]):
+            j = partners[row]
+            dx = positions[i, 0] - positions[j, 0]
+            dy = positions[i, 1] - positions[j, 1]
+            dz = positions[i, 2] - positions[j, 2]
+            gap = radii[i] + radii[j]
+            weight = 1.0 + contact_cost if dx * dx + dy * dy + dz * dz < gap * gap else 1.0
+            costs[i] += weight
+            costs[j] += weight

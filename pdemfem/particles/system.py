@@ -35,7 +35,6 @@ import logging
 import math
 
 import numpy as np
-from numba import njit
 from mpi4py import MPI
 
 from pdemfem.contact import layout
@@ -44,7 +43,7 @@ from pdemfem.contact.forces import pair_forces, plane_wall_forces
 from pdemfem.contact.registry import history_signs
 from pdemfem.neighbors.cells import cell_grid, cell_indices, out_of_order_runs, sort_by_cell
 from pdemfem.neighbors.verlet import VerletList
-from pdemfem.parallel.decomposition import Decomposition, recursive_bisection
+from pdemfem.parallel.decomposition import Decomposition, add_pair_costs, recursive_bisection
 from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.parallel.reductions import StepReductions
 from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
@@ -503,19 +502,3 @@ class ParticleSystem(kinds.StateComponent):
             "wall_work": self.walls.work,
         }
 
-
-@njit(cache=True)
-def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_cost, costs):
-    """costs[i] and costs[j] += 1 + contact_cost x touching, for every listed pair (i, j): one pass over the
-    list (numpy's version materialised six pair-length arrays at every rebuild on several ranks)."""
-    for r in range(row_particles.shape[0]):
-        i = row_particles[r]
-        for row in range(offsets[r], offsets[r + 1]):
-            j = partners[row]
-            dx = positions[i, 0] - positions[j, 0]
-            dy = positions[i, 1] - positions[j, 1]
-            dz = positions[i, 2] - positions[j, 2]
-            gap = radii[i] + radii[j]
-            weight = 1.0 + contact_cost if dx * dx + dy * dy + dz * dz < gap * gap else 1.0
-            costs[i] += weight
-            costs[j] += weight

@@ -760,15 +760,14 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
             found.append(f"{label}: at {speed:.3g} m/s the peak overlap is {ratio:.2g} radii, so the sphere passes "
                          f"through the thin surface whatever the step (the run stops when it happens): use stiffer "
                          f"materials (youngs_modulus) or lower the impact speed")
-    thin = {wall.material for wall in scene.walls if wall.kind == "mesh"} | {
-        solid.material for solid in scene.solids if solid.contact}
-    for ratio, kind, label in contact_overlaps(scene, speed):
+    thin = thin_surface_materials(scene)
+    for ratio, kind, label, partner in contact_overlaps(scene, speed):
         if ratio > 1.0 and kind == "particle_particle":
             found.append(f"contacts {label}: at the impact speed {speed:.3g} m/s the peak overlap is {ratio:.2g} of "
                          f"the smaller radius, so the spheres pass through each other (the run stops when it "
                          f"happens): use stiffer materials (youngs_modulus, normal_stiffness) or lower the speed")
-        elif ratio > PEAK_OVERLAP_WARNING and not (kind == "particle_wall" and label.split(" on ")[1] in thin
-                                                    and ratio > 1.0):
+        elif ratio > PEAK_OVERLAP_WARNING and not (ratio > 1.0 and kind == "particle_wall" and partner in thin):
+            # (a thin surface past 1 has its tunnelling warning above)
             found.append(f"contacts {label}: at the impact speed {speed:.3g} m/s the peak overlap is {ratio:.2g} of "
                          f"the smaller radius (want <= {PEAK_OVERLAP_WARNING}): the contact law is a small-overlap "
                          f"law, so forces and contact times are off; use stiffer materials (youngs_modulus, "
@@ -904,13 +903,18 @@ def _tunnelling_warnings(scene: Scene, speed: float, dt: float, smallest_radius:
     return found
 
 
+def thin_surface_materials(scene: Scene) -> set:
+    """Materials of the thin surfaces: mesh walls and the solids' contact surfaces."""
+    return ({wall.material for wall in scene.walls if wall.kind == "mesh"}
+            | {solid.material for solid in scene.solids if solid.contact})
+
+
 def thin_surface_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str]]:
     """[(peak overlap / radius, label)] of an impact at `speed` on each thin surface (mesh walls, the
     solids' contact surfaces).  delta_max / r = (15 m v^2 / (16 E* sqrt(r)))^(2/5) / r does not depend
     on r (m ~ r^3); above 1 the sphere's centre reaches the surface before the contact stops it, so
     it passes through whatever the step (the Hertz law has left its range long before)."""
-    thin = {wall.material for wall in scene.walls if wall.kind == "mesh"}
-    thin |= {solid.material for solid in scene.solids if solid.contact}
+    thin = thin_surface_materials(scene)
     found = []
     if speed <= 0.0 or not math.isfinite(speed):
         return found
@@ -929,9 +933,9 @@ def pair_peak_overlap(interaction, m_eff: float, r_eff: float, e_eff: float, spe
     return _peak_overlap(m_eff, r_eff, e_eff, speed)
 
 
-def contact_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str, str]]:
-    """[(peak overlap / smaller radius, kind, label)] of an impact at `speed` for each pair of groups
-    (kind 'particle_particle') and each group on each wall or contact solid ('particle_wall').  The contact
+def contact_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str, str, str]]:
+    """[(peak overlap / smaller radius, kind, label, partner material)] of an impact at `speed` for each pair of
+    groups (kind 'particle_particle') and each group on each wall or contact solid ('particle_wall').  The contact
     laws are small-overlap laws; two spheres overlapping by more than the smaller radius can pass through
     each other (their centres cross and the normal flips)."""
     found = []
@@ -940,7 +944,7 @@ def contact_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str, str]]
     for kind, name_a, name_b, m_eff, r_eff, e_eff, smaller in _pairs(scene, with_smaller_radius=True):
         overlap = pair_peak_overlap(scene.interaction(name_a, name_b), m_eff, r_eff, e_eff, speed)
         joiner = "-" if kind == "particle_particle" else " on "
-        found.append((overlap / smaller, kind, f"{name_a}{joiner}{name_b}"))
+        found.append((overlap / smaller, kind, f"{name_a}{joiner}{name_b}", name_b))
     return found
 
 
