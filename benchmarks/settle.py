@@ -179,7 +179,6 @@ def run_pdemfem(args) -> dict:
     from mpi4py import MPI
 
     from pdemfem import Simulation
-    import pdemfem.particles.system as system_module
 
     comm = MPI.COMM_WORLD
     rank, ranks = comm.rank, comm.size
@@ -206,8 +205,8 @@ def run_pdemfem(args) -> dict:
         timers = _Timers()
         if args.breakdown:
             system = sim.particle_system
-            timers.wrap(system_module, "pair_forces", "pair contacts")
-            timers.wrap(system_module, "plane_wall_forces", "wall contacts")
+            timers.wrap(system.contact_kernels, "pair_forces", "pair contacts")
+            timers.wrap(system.contact_kernels, "plane_wall_forces", "wall contacts")
             timers.wrap(system, "_rebuild", "neighbour list rebuild + sort")
             timers.wrap(system, "_compute_forces", "_compute_forces")
 

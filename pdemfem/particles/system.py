@@ -39,7 +39,7 @@ from mpi4py import MPI
 
 from pdemfem.contact import layout
 from pdemfem import state_dict as kinds
-from pdemfem.contact.forces import pair_forces, plane_wall_forces
+from pdemfem.contact.specialized import contact_kernels
 from pdemfem.contact.registry import history_signs
 from pdemfem.neighbors.cells import cell_grid, cell_indices, out_of_order_runs, sort_by_cell
 from pdemfem.neighbors.verlet import VerletList
@@ -75,6 +75,7 @@ class ParticleSystem(kinds.StateComponent):
         self.clumps = clumps
         self.walls = walls
         self.tables = tables
+        self.contact_kernels = contact_kernels(tables.composition)  # pair_forces, plane_wall_forces
         self.gravity = np.asarray(gravity, dtype=float)
         self.dt = float(dt)
         self.skin = float(skin)
@@ -430,13 +431,13 @@ class ParticleSystem(kinds.StateComponent):
             heat_flows[:] = 0.0
         else:
             temperatures, heat_flows = NO_TEMPERATURES, NO_HEAT_FLOWS
-        elastic, dissipated, contacts, deepest_pair = pair_forces(
+        elastic, dissipated, contacts, deepest_pair = self.contact_kernels.pair_forces(
             neighbors.row_particles, neighbors.offsets, neighbors.partners, neighbors.history, state.ids, owned,
             state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition, self.dt,
             state.forces, state.torques, temperatures, heat_flows)
         if walls.count:
-            wall_elastic, wall_dissipated, wall_contacts, deepest_wall = plane_wall_forces(
+            wall_elastic, wall_dissipated, wall_contacts, deepest_wall = self.contact_kernels.plane_wall_forces(
                 walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities,
                 walls.material_index, state.wall_history, state.positions, state.velocities,
                 state.angular_velocities, state.radii, state.mass, state.inverse_inertia, state.material_index,
