@@ -153,6 +153,32 @@ def test_ghost_update_allocates_no_arrays():
     assert buffer_bytes > 20000 and peak < buffer_bytes / 4, (peak, buffer_bytes)
 
 
+def test_ghosts_appended_again_reuse_the_arrays_and_equal_a_fresh_append():
+    """Every rebuild drops the ghosts and appends the new ones: the second append writes into the spare rows
+    the first one left (no copy of the owned rows), and every field holds what a fresh state's append gives."""
+    state, ghosts, _ = periodic_ghosts()
+    positions_buffer = state.positions.base
+    state.velocities[:state.owned_count] += 2.0  # the owned rows change between the rebuilds
+    state.drop_ghosts()
+    ghosts.plan_and_send(state)
+    assert state.ghost_count > 0 and state.positions.base is positions_buffer
+    fresh, fresh_ghosts, _ = periodic_ghosts()
+    fresh.velocities[:fresh.owned_count] += 2.0
+    fresh.drop_ghosts()
+    fresh = _copy_of(fresh)
+    fresh_ghosts.plan_and_send(fresh)
+    for name in state.registry:
+        assert np.array_equal(state.array(name), fresh.array(name)), name
+
+
+def _copy_of(state: ParticleState) -> ParticleState:
+    """The same rows in arrays of their own (no spare rows)."""
+    for name in state.registry:
+        state._set(name, state.array(name).copy())
+    state._buffers.clear()
+    return state
+
+
 # ------------------------------------------------------------------ guards
 
 

@@ -105,6 +105,9 @@ class ParticleState(kinds.StateComponent):
         self.registry = {spec.name: spec for spec in CORE_FIELDS}
         self.registry_version = 0  # bumped when a field is added or removed (the ghost scatter re-plans)
         self.fields = {}  # the arrays of the fields registered with add_field
+        # name -> the buffer an array is the leading rows of, with spare rows for the next append
+        # (`_extended`): the ghosts appended at every rebuild then copy nothing but themselves.
+        self._buffers = {}
         self.owned_count = count
         if temperatures is not None:
             self.add_field(TEMPERATURE_FIELD.name, **TEMPERATURE_FIELD.flags())[:] = temperatures
@@ -222,21 +225,39 @@ class ParticleState(kinds.StateComponent):
             packed[:, start:start + columns] = self.array(name)[rows].reshape(len(rows), columns)
         return packed
 
+    def _extended(self, name: str, count: int) -> np.ndarray:
+        """The field's array with `count` more rows (their values undefined), taken from the spare rows of its
+        buffer when it has them: the array is then a longer view of the same buffer and no row is copied."""
+        values = self.array(name)
+        rows = len(values)
+        buffer = self._buffers.get(name)
+        if (buffer is not None and values.base is buffer and rows + count <= len(buffer)
+                and values.__array_interface__["data"][0] == buffer.__array_interface__["data"][0]):
+            return buffer[:rows + count]
+        # A fifth more than needed: the ghosts of the next rebuilds (their count drifts) fit without a copy.
+        buffer = np.empty((rows + count + (rows + count) // 5 + 16, *values.shape[1:]), dtype=values.dtype)
+        buffer[:rows] = values
+        self._buffers[name] = buffer
+        return buffer[:rows + count]
+
     def append_rows(self, packed: np.ndarray, layout, as_ghosts: bool) -> None:
         """Append unpacked rows; fields not in the layout get zeros."""
         count = len(packed)
         if count == 0:
-            return  # nothing arrived: keep the arrays as they are (a concatenation would copy every one)
+            return  # nothing arrived: keep the arrays as they are
         given = {name for name, *_ in layout}
         for name, start, columns, tail, dtype in layout:
             new = packed[:, start:start + columns].reshape((count, *tail))
             if np.issubdtype(dtype, np.integer):
                 new = np.rint(new)
-            self._set(name, np.ascontiguousarray(np.concatenate([self.array(name), new.astype(dtype)])))
-        for name, values in self._all_arrays():
+            values = self._extended(name, count)
+            values[-count:] = new
+            self._set(name, values)
+        for name, _ in list(self._all_arrays()):
             if name not in given:
-                self._set(name, np.ascontiguousarray(
-                    np.concatenate([values, np.zeros((count, *values.shape[1:]), dtype=values.dtype)])))
+                values = self._extended(name, count)
+                values[-count:] = 0
+                self._set(name, values)
         if not as_ghosts:
             self.owned_count += count
 
