@@ -85,6 +85,10 @@ class Simulation:
         # rows report their mean over the output interval (an instantaneous sample of a granular
         # contact force is mostly the noise of single impacts).
         self.surface_force_means = IntervalMean()
+        self.particle_system.after_step_sum = self._add_surface_forces
+        # Within a call of step() only the coupling (the FE advance, its surfaces' reselection flag) reads the
+        # sums over the ranks of a step: without solids each step's SUM is finished at the next step's MAX.
+        self.particle_system.defer_step_sum = not self.solids
         self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
         if restart is not None:
             self.io.restore(restart, force=force)
@@ -224,14 +228,19 @@ class Simulation:
             system.step()
             if self.solids:
                 self.coupling.after_particle_step()
-            if not self.contributor_walls:  # plane walls alone: their force rows, in the scene's order
-                self.surface_force_means.add(system.walls.forces)
-            else:
-                self.surface_force_means.add([self.wall_force(name) for name in self._surface_names()])
             self.step_count += 1
             self.time = self.step_count * self.dt
             if system.largest_displacement > self.runaway_displacement:
                 break
+        # The last step's sums over the ranks, if still in flight: everything read between calls has them.
+        system.finish_step_sum()
+
+    def _add_surface_forces(self) -> None:
+        """The step's surface forces into their interval mean (called with the step's sums in place)."""
+        if not self.contributor_walls:  # plane walls alone: their force rows, in the scene's order
+            self.surface_force_means.add(self.particle_system.walls.forces)
+        else:
+            self.surface_force_means.add([self.wall_force(name) for name in self._surface_names()])
 
     @property
     def output_interval(self) -> float:

@@ -22,6 +22,7 @@ import pytest
 from mpi_harness import run_under_mpi
 
 STEPS = 12
+CALLS, STEPS_PER_CALL = 12, 7  # as in mpi_cases/deferred_sum_case.py
 
 
 @pytest.mark.mpi
@@ -37,4 +38,23 @@ def test_a_dem_step_makes_at_most_two_collectives(kind, tmp_path):
     # At least the MAX: the counter sees the step's collectives (a count of 0 would be a broken counter).
     assert min(counts) >= 1, counts
     assert max(counts) <= 2, [step["mpi4py"] for step in plain_steps]
-    assert all(set(step["mpi4py"]) <= {"Allreduce"} for step in plain_steps)  # buffer-based, nothing pickled
+    # Buffer-based, nothing pickled; the SUM is an Iallreduce where the scene leaves it in flight until the
+    # next step's MAX (no solids).
+    assert all(set(step["mpi4py"]) <= {"Allreduce", "Iallreduce"} for step in plain_steps)
+    if kind in ("planes", "walls"):
+        assert all(step["mpi4py"].get("Iallreduce") == 1 for step in plain_steps)
+
+
+@pytest.mark.mpi
+def test_a_sum_left_in_flight_to_the_next_step_gives_the_same_results_bit_for_bit(tmp_path):
+    """Every value read between steps that comes from the step's SUM (energies, contact count, the walls'
+    forces, torques and work, the history's mean surface forces) is identical with the SUM finished at once."""
+    out = tmp_path / "deferred.json"
+    run_under_mpi(2, "deferred_sum_case.py", out)
+    result = json.loads(out.read_text())
+    deferred_steps, finished_steps = result["steps_in_flight"]
+    # The deferred run left every step's SUM in flight past its forces, the other none.
+    assert deferred_steps == CALLS * STEPS_PER_CALL and finished_steps == 0
+    assert result["deferred"] == result["finished"]
+    contact_counts = [row[4] for row in result["deferred"]]
+    assert max(contact_counts) > 0

@@ -7,12 +7,18 @@ collectives per step, not their size, is what costs.  So a step makes exactly tw
 
 * MAX (`largest`): the largest particle displacement since the list build, which decides the
   rebuild on every rank alike (and feeds the run monitor's runaway stop);
-* SUM (`sum_totals`): the contact energies and count of the step, the plane walls' forces and
+* SUM (`start_sum`, `finish_sum`): the contact energies and count of the step, the plane walls' forces and
   every contributor's totals (a mesh or cylinder wall's force, moment and work; a solid
   surface's force and moment), packed into one preallocated float64 buffer.
 
 Both use numpy buffers (no pickling).  The SUM adds exactly the values the separate
 reductions added before, element by element, so results do not change.
+
+The SUM may be left in flight (`start_sum`, a non-blocking Iallreduce) and finished at the next
+step's MAX (`finish_sum`; ParticleSystem.defer_step_sum).  Every rank then waits once per step
+instead of twice: the step's two halves load the ranks differently (the kicks and drift go with
+the particle count, the forces with the contacts), and a decomposition that balances the whole
+step leaves each rank waiting for the other in one of the two when each half ends in a collective.
 """
 from __future__ import annotations
 
@@ -26,6 +32,8 @@ class StepReductions:
     def __init__(self):
         self._largest = np.zeros(1)
         self._sums = np.zeros(0)
+        self._request = None  # the SUM in flight (start_sum), if any
+        self._pending = None  # what finish_sum unpacks it into
 
     def largest(self, comm, value: float) -> float:
         """The largest `value` over the ranks (one Allreduce MAX of one double)."""
@@ -33,10 +41,16 @@ class StepReductions:
         comm.Allreduce(MPI.IN_PLACE, self._largest, op=MPI.MAX)
         return float(self._largest[0])
 
-    def sum_totals(self, comm, scalars, plane_forces: np.ndarray, contributors) -> np.ndarray:
-        """One Allreduce SUM of `scalars`, the plane walls' forces (summed in place) and each
-        contributor's `local_totals()` (handed back through `take_summed_totals`).  Returns the
-        summed scalars."""
+    @property
+    def pending(self) -> bool:
+        """A SUM started (start_sum) and not yet finished."""
+        return self._request is not None
+
+    def start_sum(self, comm, scalars, plane_forces: np.ndarray, contributors) -> None:
+        """Start one SUM over the ranks (a non-blocking Iallreduce) of `scalars`, the plane walls' forces and
+        each contributor's `local_totals()`; finish_sum puts them back summed (the forces in place, the
+        contributors' through `take_summed_totals`).  Until then they hold this rank's values."""
+        assert self._request is None, "finish the step's SUM before starting the next"
         parts = [np.asarray(scalars, dtype=float), plane_forces.reshape(-1)]
         parts += [np.asarray(contributor.local_totals(), dtype=float) for contributor in contributors]
         size = sum(part.size for part in parts)
@@ -47,12 +61,22 @@ class StepReductions:
         for part in parts:
             buffer[offset:offset + part.size] = part
             offset += part.size
-        comm.Allreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)
-        summed_scalars = buffer[:parts[0].size].copy()
-        offset = parts[0].size
-        plane_forces.reshape(-1)[:] = buffer[offset:offset + parts[1].size]
-        offset += parts[1].size
-        for contributor, part in zip(contributors, parts[2:]):
-            contributor.take_summed_totals(buffer[offset:offset + part.size].copy())
-            offset += part.size
+        self._pending = (parts[0].size, plane_forces, contributors, [part.size for part in parts[2:]])
+        self._request = comm.Iallreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)
+
+    def finish_sum(self) -> np.ndarray:
+        """Wait for the started SUM; put the plane walls' forces and the contributors' totals in place and
+        return the summed scalars."""
+        self._request.Wait()
+        self._request = None
+        scalar_count, plane_forces, contributors, sizes = self._pending
+        self._pending = None
+        buffer = self._sums
+        summed_scalars = buffer[:scalar_count].copy()
+        offset = scalar_count
+        plane_forces.reshape(-1)[:] = buffer[offset:offset + plane_forces.size]
+        offset += plane_forces.size
+        for contributor, size in zip(contributors, sizes):
+            contributor.take_summed_totals(buffer[offset:offset + size].copy())
+            offset += size
         return summed_scalars

@@ -172,6 +172,7 @@ class ParticleStreams(kinds.StateComponent):
         step = simulation.step_count
         if step < self._next_due_step:
             return
+        simulation.particle_system.finish_step_sum()  # the last step's sums in place before the insertion
         try:
             self._insert_events(simulation, step)
         finally:

@@ -118,6 +118,12 @@ class ParticleSystem(kinds.StateComponent):
         self.rebalances = 0
         self._owned_loads_zeroed = False  # set by step() between its kick_drift and the force evaluation
         self.reductions = StepReductions()  # the step's two collectives: one MAX, one SUM
+        # Leave the step's SUM in flight until the next step's MAX (finish_step_sum): set by the Simulation
+        # when nothing reads the summed values within its steps; until finished, the energies, the contact
+        # count, the plane walls' forces and the contributors' totals hold the step before's sums.
+        self.defer_step_sum = False
+        # Called with the step's sums in place (the Simulation's mean surface forces).
+        self.after_step_sum = None
         # `largest_radius`: of the particles inserted later (streams), which the ghost cutoff must cover too.
         largest_radius = max(float(state.radii.max()) if state.count else 0.0, float(largest_radius))
         self.largest_radius = comm.allreduce(largest_radius, op=MPI.MAX)
@@ -133,9 +139,11 @@ class ParticleSystem(kinds.StateComponent):
             self.ghost_cutoff += 2.0 * clumps.protrusion(state, comm)
         self._check_periodic_lengths()
         self._rebuild(force_rebalance=True)
+        self._booking_wall_work = False  # this first evaluation starts the trapezoid (_take_step_sums)
         self._compute_forces()
-        # Power of the plane walls on the particles at the last force evaluation (see step()).
+        # Power of the plane walls on the particles at the last force evaluation (see _take_step_sums).
         self.walls.previous_power = self._plane_power()
+        self._booking_wall_work = True
         if self.heat:
             # The first step's forces come from this evaluation, its heat does not: a step moves the heat
             # of its own evaluation (step), so nothing is booked for this one.
@@ -170,6 +178,7 @@ class ParticleSystem(kinds.StateComponent):
         self._owned_loads_zeroed = True
         if self.comm.size > 1:
             largest_displacement_squared = self.reductions.largest(self.comm, largest_displacement_squared)
+            self.finish_step_sum()  # the last step's SUM, if left in flight: both waited for at one point
         # Read by the run monitor's runaway stop (same value on every rank).
         self.largest_displacement = math.sqrt(largest_displacement_squared)
         self.walls.move(dt)
@@ -191,14 +200,6 @@ class ParticleSystem(kinds.StateComponent):
             ratio = update_temperatures(state.owned_count, state.temperatures, state.heat_flows, state.mass,
                                         state.material_index, self.heat_capacities, dt)
             self.heat_step_ratio = max(self.heat_step_ratio, ratio)
-        # Work done on the particles by moving walls, -F_wall . v_wall: the trapezoid of the powers at the
-        # force evaluations before and after the walls' move (velocity Verlet's kinetic energy takes the two
-        # forces' mean; one force booked the step's work a step early: a first-order error wherever a wall's
-        # force jumps, e.g. a grain on a conveyor turning from slipping to rolling).  Walls at rest: nothing.
-        if self.walls.velocities.any():
-            power = self._plane_power()
-            self.walls.work += 0.5 * (self.walls.previous_power + power) * dt
-            self.walls.previous_power = power
 
     def _plane_power(self) -> float:
         return -float(np.sum(self.walls.forces * self.walls.velocities))
@@ -460,12 +461,35 @@ class ParticleSystem(kinds.StateComponent):
         if self.clumps is not None:
             self.clumps.sum_loads(state)
         if self.comm.size > 1:
-            scalars = self.reductions.sum_totals(self.comm, (elastic, dissipated, contacts), walls.forces,
-                                                 self.contributors)
-            elastic, dissipated, contacts = scalars[0], scalars[1], int(round(scalars[2]))
+            self.reductions.start_sum(self.comm, (elastic, dissipated, contacts), walls.forces, self.contributors)
+            if not self.defer_step_sum:
+                self.finish_step_sum()
+        else:
+            self._take_step_sums(elastic, dissipated, contacts)
+
+    def finish_step_sum(self) -> None:
+        """Collective: finish the step's SUM over the ranks if it is in flight (defer_step_sum)."""
+        if self.reductions.pending:
+            scalars = self.reductions.finish_sum()
+            self._take_step_sums(scalars[0], scalars[1], int(round(scalars[2])))
+
+    def _take_step_sums(self, elastic, dissipated, contacts) -> None:
+        """Book the step's totals over the ranks (the plane walls' forces and the contributors' totals are
+        already summed in place)."""
         self.elastic_energy = float(elastic)
         self.dissipated_energy += float(dissipated)
         self.contact_count = int(contacts)
+        # Work done on the particles by moving walls, -F_wall . v_wall: the trapezoid of the powers at the
+        # force evaluations before and after the walls' move (velocity Verlet's kinetic energy takes the two
+        # forces' mean; one force booked the step's work a step early: a first-order error wherever a wall's
+        # force jumps, e.g. a grain on a conveyor turning from slipping to rolling).  Walls at rest: nothing.
+        walls = self.walls
+        if self._booking_wall_work and walls.velocities.any():
+            power = self._plane_power()
+            walls.work += 0.5 * (walls.previous_power + power) * self.dt
+            walls.previous_power = power
+        if self.after_step_sum is not None:
+            self.after_step_sum()
 
     # ---------------------------------------------------------------- queries
     def owned_range(self) -> tuple:

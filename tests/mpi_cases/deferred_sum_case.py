@@ -1,0 +1,84 @@
+"""MPI case: a step's SUM over the ranks left in flight until the next step's MAX (ParticleSystem.defer_step_sum,
+what a Simulation without solids does) gives the same results, bit for bit, as the SUM finished at once
+(tests/test_collectives.py).
+
+usage: deferred_sum_case.py OUT.json
+
+The scene has every reader of the summed values: grains between a spinning cylinder drum, a moving, spinning
+mesh lid and a conveyor floor (a plane whose surface moves: its work on the grains is booked from the summed
+forces); between calls of Simulation.step the case reads the energies, the contact count, every wall's force,
+torque and work, and the history row's mean surface forces.
+"""
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+import pdemfem  # noqa: F401,E402  (environment first)
+from mpi4py import MPI  # noqa: E402
+
+CALLS = 12
+STEPS_PER_CALL = 7
+
+
+def scene(folder: Path) -> dict:
+    import restart_scenes
+
+    data = restart_scenes.pile_scene(folder, 1000, 1000)
+    data["output"] = {"dir": str(folder / "out"), "every": 1.0}
+    del data["solids"], data["coupling"]
+    data["walls"].append({"name": "floor", "kind": "plane", "point": [0, 0, 0.02], "normal": [0, 0, 1],
+                          "material": "grain", "transport_velocity": [0.5, 0.0, 0.0]})
+    return restart_scenes.add_moving_walls(data, folder)
+
+
+def readings(simulation) -> list:
+    """Everything a user or the run loop reads between steps that comes from the step's sums."""
+    system = simulation.particle_system
+    values = list(simulation.energies().values()) + [simulation.contact_count(), system.walls.work]
+    for name in ("drum", "lid"):
+        values += list(simulation.wall_force(name)) + list(simulation.wall_torque(name))
+    values += list(simulation.wall_force("floor"))
+    values += [float(value) for value in simulation.surface_force_means.take(fallback=None).reshape(-1)]
+    values += [wall.work for wall in simulation.contributor_walls]
+    return [float(value) for value in values]
+
+
+def run(folder: Path, defer: bool, comm) -> tuple:
+    from pdemfem import Simulation
+
+    simulation = Simulation.from_dict(scene(folder), comm=comm, base_dir=folder, output_dir=str(folder / "out"),
+                                      force=True)
+    assert simulation.particle_system.defer_step_sum  # a scene without solids defers by default
+    simulation.particle_system.defer_step_sum = defer
+    system = simulation.particle_system
+    compute_forces = system._compute_forces
+    in_flight = [0]
+
+    def counted():  # steps whose SUM is still in flight after their force evaluation
+        compute_forces()
+        in_flight[0] += system.reductions.pending
+    system._compute_forces = counted
+    rows = []
+    for _ in range(CALLS):
+        simulation.step(STEPS_PER_CALL)
+        rows.append(readings(simulation))
+    return rows, in_flight[0]
+
+
+def main():
+    out = sys.argv[1]
+    comm = MPI.COMM_WORLD
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(comm.bcast(folder if comm.rank == 0 else None, root=0))
+        deferred, deferred_steps = run(folder, True, comm)
+        finished, finished_steps = run(folder, False, comm)
+        comm.Barrier()
+    if comm.rank == 0:
+        Path(out).write_text(json.dumps({"ranks": comm.size, "deferred": deferred, "finished": finished,
+                                         "steps_in_flight": [deferred_steps, finished_steps]}))
+
+
+if __name__ == "__main__":
+    main()
