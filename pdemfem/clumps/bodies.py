@@ -40,7 +40,8 @@ from numba import njit
 from pdemfem import state_dict as kinds
 from pdemfem.clumps.quaternion import quaternion_conjugates, quaternion_products
 from pdemfem.clumps.rigid_body import (angular_momenta_from_velocities, angular_velocities_from_momenta,
-                                       body_rotations, kick_bodies_and_spin, kick_drift_bodies, member_levers,
+                                       ROTATION_ROWS, body_rotations,
+                                       kick_bodies_and_spin, kick_drift_bodies, member_levers,
                                        move_members, place_members, rotational_energies, sum_row_loads)
 from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.integrate import keep_largest, kick_drift_row
@@ -126,6 +127,8 @@ class ClumpBodies(kinds.StateComponent):
         self.angular_velocities = np.zeros((self.count, 3))
         angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
                                         self.angular_velocities)
+        # Scratch columns of the drift's vectorised rotation (kick_drift_bodies), kept from step to step.
+        self._rotation_work = np.empty((ROTATION_ROWS, self.count))
 
     @property
     def count(self) -> int:
@@ -222,7 +225,7 @@ class ClumpBodies(kinds.StateComponent):
                                           state.positions_at_build)
         kick_drift_bodies(self.count, self.positions, self.velocities, self.orientations, self.angular_momenta,
                           self.forces, self.torques, self.inverse_masses, self.principal_moments, gravity, 0.5 * dt,
-                          dt, self.rotations, self.angular_velocities)
+                          dt, self.rotations, self.angular_velocities, self._rotation_work)
         members = place_members(self.member_rows, self.member_body, self.member_offsets, self.rotations,
                                 self.positions, self.velocities, self.angular_velocities, self.member_levers,
                                 state.positions, state.velocities, state.angular_velocities, state.positions_at_build)
