@@ -226,7 +226,8 @@ class ClumpBodies(kinds.StateComponent):
                 and np.array_equal(self._indexed[0], row_ids)):
             return
         body = state.fields[BODY_FIELD][:owned]
-        member_rows, member_offsets, levers = np.empty(owned, dtype=np.int64), np.empty((owned, 3)), np.empty((owned, 3))
+        member_rows = np.empty(owned, dtype=np.int64)
+        member_offsets, levers = np.empty((owned, 3)), np.empty((owned, 3))
         # Levers R(q) offset: the load sum reads them before the next step places the members.
         members = index_members(owned, body, state.fields[OFFSET_FIELD], self.ids, self.rotations, self.member_start,
                                 member_rows, member_offsets, levers)
