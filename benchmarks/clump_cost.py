@@ -1,7 +1,7 @@
 """Cost per contact of 2-sphere clumps (dumbbells) against single spheres, same settle scene, same run.
 
     python benchmarks/clump_cost.py [--bodies 3000] [--pre-steps 6000] [--steps 1000] [--repeat 2]
-                                    [--separation 1.2]
+                                    [--separation 1.2] [--phases]
 
 Both scenes settle in the same box of five plane walls under gravity from a jittered lattice: one of
 `--bodies` dumbbells (two spheres of radius r, centres `--separation` r apart: 1.2 overlapping, 2.0
@@ -13,6 +13,12 @@ pairs, sampled every 100 steps (the two members of one dumbbell are never a list
 contact).  The two are timed alternately (`--repeat` rounds, best of each) so a busy machine slows both
 alike; the CPU time of the same steps is reported beside the wall time.  Writes
 benchmarks/results/clump_cost.json (clump_cost_<separation>.json for another separation).
+
+--phases also prints where the step's CPU time goes, per step of each scene (the pair kernel, the
+walls, the list rebuilds with the neighbour list build and the clumps' member refresh inside them, the
+integration passes: the sphere kicks or the clumps' first half, load sum and second half; the rest is the
+step's Python and the wall/contributor bookkeeping).  The timers wrap the solver's own functions and
+cost two clock reads per call, so the figures of a --phases run are a little higher than without.
 """
 from __future__ import annotations
 
@@ -54,6 +60,39 @@ def scene(bodies: int, clumps: bool, separation: float = 1.2) -> dict:
             "particles": [group], "walls": walls, "output": {"every": 1.0, "particles": [], "solids": []}}
 
 
+PHASE_TIMES: dict = {}
+PHASE_CALLS: dict = {}
+
+
+def _timed_call(function, label):
+    def timed_function(*args, **kwargs):
+        start = time.process_time()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            PHASE_TIMES[label] = PHASE_TIMES.get(label, 0.0) + time.process_time() - start
+            PHASE_CALLS[label] = PHASE_CALLS.get(label, 0) + 1
+    return timed_function
+
+
+# (owner, attribute, label): module functions the step calls by their module-level name, and methods.
+def _phase_targets():
+    from pdemfem.clumps.bodies import ClumpBodies
+    from pdemfem.neighbors.verlet import VerletList
+    from pdemfem.particles import system
+    return [(system, "pair_forces", "pair kernel"), (system, "plane_wall_forces", "walls"),
+            (system.ParticleSystem, "_rebuild", "rebuild"), (VerletList, "build", "  neighbour list build"),
+            (ClumpBodies, "refresh_rows", "  member refresh"),
+            (system, "kick_drift", "sphere kick+drift"), (system, "kick", "sphere kick"),
+            (ClumpBodies, "first_half", "clump first half"), (ClumpBodies, "sum_loads", "clump load sum"),
+            (ClumpBodies, "second_half", "clump second half")]
+
+
+def install_phase_timers() -> None:
+    for owner, name, label in _phase_targets():
+        setattr(owner, name, _timed_call(getattr(owner, name), label))
+
+
 def timed(simulation, steps: int) -> tuple:
     """(wall seconds, CPU seconds, mean contact count) of `steps` steps."""
     contacts, elapsed, cpu = [], 0.0, 0.0
@@ -64,6 +103,28 @@ def timed(simulation, steps: int) -> tuple:
         cpu += time.process_time() - start_cpu
         contacts.append(simulation.contact_count())
     return elapsed, cpu, float(np.mean(contacts))
+
+
+def print_phases(phases: dict, steps: int, members: dict) -> None:
+    """CPU us per step by phase (mean of the rounds), for both scenes, and the clumps' share per member
+    relative to the spheres'."""
+    print(f"CPU time by phase, us per step (mean of the rounds; calls per {steps} steps)")
+    print(f"{'':24} {'spheres':>9} {'calls':>6} {'clumps':>9} {'calls':>6}")
+    labels = [label for _, _, label in _phase_targets()]
+    totals = {kind: phases[kind].get("whole step", {"seconds": 0.0})["seconds"] for kind in phases}
+    for kind in phases:
+        top = sum(row["seconds"] for label, row in phases[kind].items()
+                  if label != "whole step" and not label.startswith("  "))
+        phases[kind]["rest"] = {"seconds": totals[kind] - top, "calls": steps}
+    for label in labels + ["rest", "whole step"]:
+        cells = []
+        for kind in ("spheres", "clumps"):
+            row = phases[kind].get(label)
+            cells.append(f"{1e6 * row['seconds'] / steps:9.1f} {row['calls']:6.0f}" if row else f"{'-':>9} {'':6}")
+        print(f"{label:24} {cells[0]} {cells[1]}")
+    if totals["spheres"] > 0:
+        per_member = (totals["clumps"] / members["clumps"]) / (totals["spheres"] / members["spheres"])
+        print(f"clump step per member sphere / sphere step per sphere: {per_member:.2f}")
 
 
 def main(argv=None) -> int:
@@ -79,7 +140,10 @@ def main(argv=None) -> int:
     parser.add_argument("--separation", type=float, default=1.2,
                         help="distance of the dumbbell's sphere centres in radii (1.2 overlapping, 2.0 touching)")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--phases", action="store_true", help="also print the step's CPU time by phase")
     args = parser.parse_args(argv)
+    if args.phases:
+        install_phase_timers()
     if args.json is None:
         name = "clump_cost.json" if args.separation == 1.2 else f"clump_cost_{args.separation:g}.json"
         args.json = HERE / "results" / name
@@ -90,9 +154,20 @@ def main(argv=None) -> int:
                                                  base_dir=folder, output_dir=folder / "out")
         simulations[kind].step(args.pre_steps)
     best = {kind: None for kind in simulations}
+    phases = {kind: {} for kind in simulations}
     for _ in range(args.repeat):
         for kind, simulation in simulations.items():
+            PHASE_TIMES.clear()
+            PHASE_CALLS.clear()
             elapsed, cpu, contacts = timed(simulation, args.steps)
+            if args.phases:
+                for label, seconds in PHASE_TIMES.items():
+                    row = phases[kind].setdefault(label, {"seconds": 0.0, "calls": 0})
+                    row["seconds"] += seconds / args.repeat
+                    row["calls"] += PHASE_CALLS[label] / args.repeat
+                row = phases[kind].setdefault("whole step", {"seconds": 0.0, "calls": 0})
+                row["seconds"] += cpu / args.repeat
+                row["calls"] += args.steps / args.repeat
             per_contact = 1e9 * elapsed / (args.steps * contacts)
             if best[kind] is None or per_contact < best[kind]["ns_per_contact"]:
                 best[kind] = {"ns_per_contact": per_contact, "seconds": elapsed, "cpu_seconds": cpu,
@@ -108,10 +183,14 @@ def main(argv=None) -> int:
               f"{row['mean_contacts'] / row['members']:10.2f} {row['seconds'] / args.steps:10.2e} "
               f"{row['ns_per_contact']:13.1f} {row['cpu_ns_per_contact']:17.1f}")
     print(f"clumps / spheres: per step {step_ratio:.2f}, per contact {ratio:.2f} (target <= 1.3)")
+    if args.phases:
+        print_phases(phases, args.steps, {kind: best[kind]["members"] for kind in best})
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"bodies": args.bodies, "pre_steps": args.pre_steps, "steps": args.steps,
-                                     "separation": args.separation, "results": best, "ratio": ratio,
-                                     "step_ratio": step_ratio}, indent=2))
+    result = {"bodies": args.bodies, "pre_steps": args.pre_steps, "steps": args.steps,
+              "separation": args.separation, "results": best, "ratio": ratio, "step_ratio": step_ratio}
+    if args.phases:
+        result["phases_cpu_seconds_mean_of_rounds"] = phases
+    args.json.write_text(json.dumps(result, indent=2))
     return 0
 
 

@@ -12,9 +12,12 @@ import numpy as np
 import pytest
 
 from pdemfem.clumps.quaternion import quaternion_from_axis_angle, rotation_matrices
-from pdemfem.clumps.rigid_body import (SMALL_HALF_ANGLE, _half_angle_cosine_sine, angular_momenta_from_velocities,
-                                       angular_velocities_from_momenta, drift_bodies, kick_bodies, member_states,
-                                       rotational_energies, sum_member_loads)
+from pdemfem.clumps.rigid_body import (ROTATION_ROWS, SMALL_HALF_ANGLE, _half_angle_cosine_sine,
+                                       angular_momenta_from_velocities, angular_velocities_from_momenta,
+                                       body_rotations, drift_bodies, first_half_bodies, index_members,
+                                       kick_bodies, kick_bodies_and_spin, kick_drift_bodies, member_states,
+                                       move_members, place_members, rotational_energies, second_half_bodies,
+                                       sum_body_loads, sum_member_loads, sum_row_loads)
 
 EPS = np.finfo(float).eps
 NO_GRAVITY = np.zeros(3)
@@ -285,3 +288,135 @@ def _compose(a, b):
     w1, v1 = a[0], a[1:]
     w2, v2 = b[0], b[1:]
     return np.concatenate([[w1 * w2 - v1 @ v2], w1 * v2 + w2 * v1 + np.cross(v1, v2)])
+
+
+def test_stepped_first_half_is_the_per_body_kick_and_drift_bit_for_bit():
+    """kick_drift_bodies (the step's kernel: the rotation vectorised over columns, the bodies beyond the
+    polynomials' range redone with math.cos and math.sin) gives exactly the values of kick_bodies,
+    drift_bodies, body_rotations and angular_velocities_from_momenta one body at a time: the same
+    operations in the same order, so equality is exact.  Bodies of every kind mixed: small turns, turns
+    beyond SMALL_HALF_ANGLE, a non-finite L; a count no vector width divides."""
+    rng = np.random.default_rng(5)
+    count, dt, half_dt = 37, 1e-4, 0.5e-4
+    gravity = np.array([0.0, 0.0, -9.81])
+    orientations = rng.normal(size=(count, 4))
+    orientations /= np.linalg.norm(orientations, axis=1)[:, None]
+    moments = rng.uniform(1.0, 3.0, size=(count, 3))
+    momenta = rng.normal(size=(count, 3))  # |omega| dt / 2 ~ 1e-4: the polynomials
+    momenta[[3, 17, 30]] *= 2000.0  # half angles ~ 0.1-0.3 rad: the library functions
+    momenta[11, 1] = np.nan
+    positions, velocities = rng.normal(size=(count, 3)), rng.normal(size=(count, 3))
+    forces, torques = rng.normal(size=(count, 3)), rng.normal(size=(count, 3))
+    inverse_masses = rng.uniform(0.5, 2.0, size=count)
+    expected = [a.copy() for a in (positions, velocities, orientations, momenta)]
+    kick_bodies(count, expected[1], expected[3], forces, torques, inverse_masses, gravity, half_dt)
+    drift_bodies(count, expected[0], expected[1], expected[2], expected[3], moments, dt)
+    expected_rotations = np.empty((count, 3, 3))
+    body_rotations(count, expected[2], expected_rotations)
+    expected_spins = np.empty((count, 3))
+    angular_velocities_from_momenta(count, expected[2], expected[3], moments, expected_spins)
+    rotations, spins = np.empty((count, 3, 3)), np.empty((count, 3))
+    kick_drift_bodies(count, positions, velocities, orientations, momenta, forces, torques, inverse_masses, moments,
+                      gravity, half_dt, dt, rotations, spins, np.empty((ROTATION_ROWS, count)))
+    for got, wanted in zip((positions, velocities, orientations, momenta, rotations, spins),
+                           (*expected, expected_rotations, expected_spins)):
+        np.testing.assert_array_equal(got, wanted)  # exact (NaN where NaN)
+    assert np.isnan(orientations[11]).all() and np.isfinite(np.delete(orientations, 11, axis=0)).all()
+
+
+def test_step_kernels_body_by_body_are_the_member_kernels_bit_for_bit():
+    """The step's kernels go body by body over a member index (index_members): first_half_bodies,
+    sum_body_loads, second_half_bodies.  They give exactly the values of the member-by-member kernels
+    (kick_bodies + drift_bodies, place_members, sum_row_loads, kick_bodies_and_spin + move_members over
+    the member rows ascending): the same operations, each body's loads added in the same order.
+    Bodies of 0 to 3 members, free rows between the members, body ids not contiguous."""
+    rng = np.random.default_rng(11)
+    body_ids = np.array([3, 7, 8, 20, 21], dtype=np.int64)
+    sizes = [2, 1, 3, 0, 2]
+    rows_body = np.concatenate([np.repeat(body_ids, sizes), -np.ones(4, dtype=np.int64)])
+    rng.shuffle(rows_body)
+    count, rows = len(body_ids), len(rows_body)
+    offsets = rng.normal(size=(rows, 3))
+    dt, half_dt, gravity = 1e-4, 0.5e-4, np.array([0.0, 0.0, -9.81])
+    orientations = rng.normal(size=(count, 4))
+    orientations /= np.linalg.norm(orientations, axis=1)[:, None]
+    bodies = dict(positions=rng.normal(size=(count, 3)), velocities=rng.normal(size=(count, 3)),
+                  orientations=orientations, momenta=rng.normal(size=(count, 3)))
+    moments = rng.uniform(1.0, 3.0, size=(count, 3))
+    forces, torques = rng.normal(size=(count, 3)), rng.normal(size=(count, 3))
+    inverse_masses = rng.uniform(0.5, 2.0, size=count)
+    at_build = rng.normal(size=(rows, 3))
+    rotations = np.empty((count, 3, 3))
+    body_rotations(count, orientations, rotations)
+
+    member_start, member_rows = np.empty(count + 1, dtype=np.int64), np.empty(rows, dtype=np.int64)
+    member_offsets, levers = np.empty((rows, 3)), np.empty((rows, 3))
+    members = index_members(rows, rows_body, offsets, body_ids, rotations, member_start, member_rows,
+                            member_offsets, levers)
+    assert members == sum(sizes) and np.array_equal(np.diff(member_start), sizes)
+    for b in range(count):
+        mine = member_rows[member_start[b]:member_start[b + 1]]
+        assert np.array_equal(mine, np.flatnonzero(rows_body == body_ids[b]))  # rows ascending
+    member_rows, member_offsets, levers = member_rows[:members], member_offsets[:members], levers[:members]
+    assert np.array_equal(member_offsets, offsets[member_rows])
+
+    # The reference: members in row order, their body by local index.
+    reference_rows = np.flatnonzero(rows_body >= 0)
+    reference_body = np.searchsorted(body_ids, rows_body[reference_rows])
+    reference_offsets = np.ascontiguousarray(offsets[reference_rows])
+    mapping = np.searchsorted(reference_rows, member_rows)  # member m of the index -> its reference member
+
+    old = {name: value.copy() for name, value in bodies.items()}
+    kick_bodies(count, old["velocities"], old["momenta"], forces, torques, inverse_masses, gravity, half_dt)
+    drift_bodies(count, old["positions"], old["velocities"], old["orientations"], old["momenta"], moments, dt)
+    old_rotations, old_spins = np.empty((count, 3, 3)), np.empty((count, 3))
+    body_rotations(count, old["orientations"], old_rotations)
+    angular_velocities_from_momenta(count, old["orientations"], old["momenta"], moments, old_spins)
+    old_rows = [np.full((rows, 3), 5.0) for _ in range(3)]
+    old_levers = np.empty((members, 3))
+    old_largest = place_members(reference_rows, reference_body, reference_offsets, old_rotations, old["positions"],
+                                old["velocities"], old_spins, old_levers, *old_rows, at_build)
+
+    new_rows = [np.full((rows, 3), 5.0) for _ in range(3)]
+    spins = np.empty((count, 3))
+    largest = first_half_bodies(count, bodies["positions"], bodies["velocities"], bodies["orientations"],
+                                bodies["momenta"], forces, torques, inverse_masses, moments, gravity, half_dt, dt,
+                                rotations, spins, np.empty((ROTATION_ROWS, count)), member_start, member_rows,
+                                member_offsets, levers, *new_rows, at_build)
+    assert largest == old_largest
+    for name in bodies:
+        assert np.array_equal(bodies[name], old[name])  # exact
+    assert np.array_equal(rotations, old_rotations) and np.array_equal(spins, old_spins)
+    assert np.array_equal(levers, old_levers[mapping])
+    for new, previous in zip(new_rows, old_rows):
+        assert np.array_equal(new, previous)  # free rows untouched (5.0) in both
+
+    row_forces, row_torques = rng.normal(size=(rows, 3)), rng.normal(size=(rows, 3))
+    old_forces, old_torques = np.full((count, 3), 9.0), np.full((count, 3), 9.0)
+    sum_row_loads(reference_rows, reference_body, old_levers, row_forces, row_torques, old_forces, old_torques)
+    new_forces, new_torques = np.full((count, 3), 9.0), np.full((count, 3), 9.0)
+    sum_body_loads(count, member_start, member_rows, levers, row_forces, row_torques, new_forces, new_torques)
+    assert np.array_equal(new_forces, old_forces) and np.array_equal(new_torques, old_torques)
+    assert not new_forces[sizes.index(0)].any()  # a body without members here carries no load
+
+    kick_bodies_and_spin(count, old["velocities"], old["momenta"], old_forces, old_torques, inverse_masses, gravity,
+                         half_dt, old_rotations, moments, old_spins)
+    move_members(reference_rows, reference_body, old_levers, old["velocities"], old_spins, old_rows[1], old_rows[2])
+    second_half_bodies(count, bodies["velocities"], bodies["momenta"], new_forces, new_torques, inverse_masses,
+                       gravity, half_dt, rotations, moments, spins, member_start, member_rows, levers, new_rows[1],
+                       new_rows[2])
+    assert np.array_equal(bodies["velocities"], old["velocities"]) and np.array_equal(bodies["momenta"], old["momenta"])
+    assert np.array_equal(spins, old_spins)
+    assert np.array_equal(new_rows[1], old_rows[1]) and np.array_equal(new_rows[2], old_rows[2])
+
+
+def test_member_index_names_a_member_whose_body_is_not_held():
+    """index_members returns -1 - row for the first row whose body id is not among the held ones (the
+    caller raises naming that body)."""
+    body_ids = np.array([2, 5], dtype=np.int64)
+    offsets, rotations = np.zeros((4, 3)), np.tile(np.eye(3), (2, 1, 1))
+    buffers = (np.empty(3, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty((4, 3)), np.empty((4, 3)))
+    for missing in (4, 9, 0):  # inside, above and below the held ids' span
+        body = np.array([5, -1, missing, 2], dtype=np.int64)
+        assert index_members(4, body, offsets, body_ids, rotations, *buffers) == -1 - 2
+    assert index_members(4, np.array([5, -1, 5, 2], dtype=np.int64), offsets, body_ids, rotations, *buffers) == 3

@@ -51,8 +51,8 @@ def one_sphere_scenes(velocities, spins, interaction):
 
 
 def test_one_sphere_clump_falls_as_the_sphere_bit_for_bit(tmp_path):
-    """Translation only (a vertical drop onto the floor, no torque): kick_drift_bodies, place_members
-    and kick_bodies_and_spin do the sphere integrator's arithmetic on the same numbers (the offset is 0, the
+    """Translation only (a vertical drop onto the floor, no torque): first_half_bodies and
+    second_half_bodies do the sphere integrator's arithmetic on the same numbers (the offset is 0, the
     mass the same), so every bit agrees, through the bounce."""
     sphere_scene, clump_scene = one_sphere_scenes([[0.0, 0.0, -0.1]], [[0.0, 0.0, 0.0]],
                                                   {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.5})
@@ -313,3 +313,35 @@ def test_history_counts_a_spinning_clump_as_one_rigid_body(tmp_path):
     as_spheres = 0.5 * np.sum(np.einsum("ij,ij->i", state.angular_velocities, state.angular_velocities)
                               / state.inverse_inertia)
     assert abs(as_spheres - expected) > 0.1 * expected
+
+
+def test_member_index_follows_the_rows_and_stands_while_they_stay(tmp_path):
+    """refresh_rows at a rebuild: the member index (each body's member rows, offsets, levers) is remade
+    when the owned rows hold other particles (here reversed), and kept as it is, without a pass over
+    the members, when they hold the same ones."""
+    from pdemfem.clumps.bodies import OFFSET_FIELD
+    from pdemfem.clumps.quaternion import rotation_matrices
+
+    sim = build(pile(tmp_path, "run"), tmp_path)
+    sim.step(50)
+    system = sim.particle_system
+    clumps, state = system.clumps, system.state
+
+    def check_index():
+        body = state.fields[BODY_FIELD][:state.owned_count]
+        rotations = rotation_matrices(clumps.orientations)
+        for b, identity in enumerate(clumps.ids):
+            mine = clumps.member_rows[clumps.member_start[b]:clumps.member_start[b + 1]]
+            assert np.array_equal(mine, np.flatnonzero(body == identity))
+            levers = clumps.member_levers[clumps.member_start[b]:clumps.member_start[b + 1]]
+            # R(q) offset from the same numbers; the kernel sums in another order: round-off of a lever
+            assert np.abs(levers - state.fields[OFFSET_FIELD][mine] @ rotations[b].T).max() <= 4 * EPS * 3e-3
+
+    check_index()
+    kept = clumps.member_rows
+    clumps.refresh_rows(state)
+    assert clumps.member_rows is kept  # the same particles in the same rows: nothing redone
+    state.reorder(np.arange(state.owned_count)[::-1].copy())
+    clumps.refresh_rows(state)
+    assert clumps.member_rows is not kept
+    check_index()

@@ -12,13 +12,18 @@ its inertia, which the contact laws read; the sphere integrator skips members.  
 (ParticleSystem.step with clumps):
 
     first_half    free spheres: half kick and drift (kick_drift_free_spheres, which zeroes every owned
-                  row's loads, as kick_drift does); bodies: half kick, drift, R(q), omega from L
-                  (kick_drift_bodies); member rows <- place_members (position, velocity, spin; the
-                  lever R(q) offset kept per member)
+                  row's loads, as kick_drift does); bodies and their members in one kernel
+                  (first_half_bodies): half kick, drift, R(q), omega from L (the rotation vectorised over
+                  the bodies), then each body's member rows (position, velocity, spin; the lever R(q)
+                  offset kept per member)
     (list rebuild or ghost update; every contact force on the rows)
-    sum_loads     body F, T <- sum_row_loads of the owned members' rows (after the contacts)
-    second_half   free spheres: half kick; bodies: half kick and omega (kick_bodies_and_spin, with the
-                  R of the first half); member velocities and spins (move_members)
+    sum_loads     body F, T <- the owned members' loads, body by body (sum_body_loads)
+    second_half   free spheres: half kick; bodies: half kick and omega (with the R of the first half),
+                  then their members' velocities and spins (second_half_bodies)
+
+The body kernels reach a body's members through the member index refresh_rows makes at a list
+rebuild (member_start, member_rows: the owned rows of each body, ascending), and only when the rows
+hold other particles than at the last one.
 
 The kick formulas are those of pdemfem.particles.integrate, so a clump of one sphere follows the
 sphere's translation bit for bit (its rotation goes through L = I omega: equal to round-off).
@@ -39,9 +44,10 @@ from numba import njit
 
 from pdemfem import state_dict as kinds
 from pdemfem.clumps.quaternion import quaternion_conjugates, quaternion_products
-from pdemfem.clumps.rigid_body import (angular_momenta_from_velocities, angular_velocities_from_momenta,
-                                       body_rotations, kick_bodies_and_spin, kick_drift_bodies, member_levers,
-                                       move_members, place_members, rotational_energies, sum_row_loads)
+from pdemfem.clumps.rigid_body import (ROTATION_ROWS, angular_momenta_from_velocities,
+                                       angular_velocities_from_momenta, body_rotations, first_half_bodies,
+                                       index_members, rotational_energies, second_half_bodies,
+                                       sum_body_loads)
 from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.integrate import keep_largest, kick_drift_row
 
@@ -105,7 +111,6 @@ class ClumpBodies(kinds.StateComponent):
         self.replicated = True
         self.comm = None  # set by the particle system
         self._derive()
-        self.member_rows = np.zeros(0, dtype=np.int64)
 
     @classmethod
     def from_insertion(cls, inserted):
@@ -126,6 +131,14 @@ class ClumpBodies(kinds.StateComponent):
         self.angular_velocities = np.zeros((self.count, 3))
         angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
                                         self.angular_velocities)
+        # Scratch columns of the drift's vectorised rotation (first_half_bodies), kept from step to step.
+        self._rotation_work = np.empty((ROTATION_ROWS, self.count))
+        # No member index until refresh_rows (the next rebuild) makes one for these bodies.
+        self.member_start = np.zeros(self.count + 1, dtype=np.int64)
+        self.member_rows = np.zeros(0, dtype=np.int64)
+        self.member_offsets = np.zeros((0, 3))
+        self.member_levers = np.zeros((0, 3))
+        self._indexed = None
 
     @property
     def count(self) -> int:
@@ -201,15 +214,28 @@ class ClumpBodies(kinds.StateComponent):
         self._sort()
 
     def refresh_rows(self, state) -> None:
-        """After a rebuild (rows sorted, removed, appended): the owned member rows and their body data."""
+        """After a rebuild (rows sorted, removed, appended): the members of each body (member_start,
+        member_rows, rows ascending within a body), their offsets and levers.  When the owned rows hold
+        the same particles as at the last refresh and the bodies are the same (a rebuild that moved no
+        row: one rank, no reorder), the index stands as it is: the levers were set by this step's
+        first_half and the rows have not moved since."""
         self.replicated = False
-        body = state.fields[BODY_FIELD][:state.owned_count]
-        self.member_rows = np.flatnonzero(body >= 0).astype(np.int64)
-        self.member_body = self.local_index(body[self.member_rows])
-        self.member_offsets = np.ascontiguousarray(state.fields[OFFSET_FIELD][self.member_rows])
+        owned = state.owned_count
+        row_ids = state.ids[:owned]
+        if (self._indexed is not None and self._indexed[1] is self.ids and len(self._indexed[0]) == owned
+                and np.array_equal(self._indexed[0], row_ids)):
+            return
+        body = state.fields[BODY_FIELD][:owned]
+        member_rows = np.empty(owned, dtype=np.int64)
+        member_offsets, levers = np.empty((owned, 3)), np.empty((owned, 3))
         # Levers R(q) offset: the load sum reads them before the next step places the members.
-        self.member_levers = np.empty((len(self.member_rows), 3))
-        member_levers(len(self.member_rows), self.member_body, self.member_offsets, self.rotations, self.member_levers)
+        members = index_members(owned, body, state.fields[OFFSET_FIELD], self.ids, self.rotations, self.member_start,
+                                member_rows, member_offsets, levers)
+        if members < 0:
+            raise RuntimeError(f"the body {int(body[-1 - members])} of a clump member is not on its rank")
+        self.member_rows, self.member_offsets, self.member_levers = (member_rows[:members], member_offsets[:members],
+                                                                     levers[:members])
+        self._indexed = (row_ids.copy(), self.ids)
 
     # ------------------------------------------------------------------ the step
     def first_half(self, state, gravity, dt) -> float:
@@ -220,27 +246,26 @@ class ClumpBodies(kinds.StateComponent):
                                           state.velocities, state.angular_velocities, state.forces, state.torques,
                                           state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt, dt,
                                           state.positions_at_build)
-        kick_drift_bodies(self.count, self.positions, self.velocities, self.orientations, self.angular_momenta,
-                          self.forces, self.torques, self.inverse_masses, self.principal_moments, gravity, 0.5 * dt,
-                          dt, self.rotations, self.angular_velocities)
-        members = place_members(self.member_rows, self.member_body, self.member_offsets, self.rotations,
-                                self.positions, self.velocities, self.angular_velocities, self.member_levers,
-                                state.positions, state.velocities, state.angular_velocities, state.positions_at_build)
+        members = first_half_bodies(self.count, self.positions, self.velocities, self.orientations,
+                                    self.angular_momenta, self.forces, self.torques, self.inverse_masses,
+                                    self.principal_moments, gravity, 0.5 * dt, dt, self.rotations,
+                                    self.angular_velocities, self._rotation_work, self.member_start, self.member_rows,
+                                    self.member_offsets, self.member_levers, state.positions, state.velocities,
+                                    state.angular_velocities, state.positions_at_build)
         return max(largest, members)
 
     def sum_loads(self, state) -> None:
         """Body force and torque about the centre of mass from the owned members' contact loads."""
-        sum_row_loads(self.member_rows, self.member_body, self.member_levers, state.forces, state.torques,
-                      self.forces, self.torques)
+        sum_body_loads(self.count, self.member_start, self.member_rows, self.member_levers, state.forces,
+                       state.torques, self.forces, self.torques)
 
     def second_half(self, state, gravity, dt) -> None:
         kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities, state.angular_velocities,
                           state.forces, state.torques, state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt)
-        kick_bodies_and_spin(self.count, self.velocities, self.angular_momenta, self.forces, self.torques,
-                             self.inverse_masses, gravity, 0.5 * dt, self.rotations, self.principal_moments,
-                             self.angular_velocities)
-        move_members(self.member_rows, self.member_body, self.member_levers, self.velocities,
-                     self.angular_velocities, state.velocities, state.angular_velocities)
+        second_half_bodies(self.count, self.velocities, self.angular_momenta, self.forces, self.torques,
+                           self.inverse_masses, gravity, 0.5 * dt, self.rotations, self.principal_moments,
+                           self.angular_velocities, self.member_start, self.member_rows, self.member_levers,
+                           state.velocities, state.angular_velocities)
 
     # ------------------------------------------------------------------ energies
     def energy_sums(self, state, gravity):
