@@ -61,6 +61,34 @@ def test_verlet_contacts_equal_brute_force():
     assert checked_contacts > 500
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_list_build_holds_every_pair_within_the_cutoff_once(seed):
+    """The stencil's runs of cells (pdemfem/neighbors/verlet.py) against all pairs: every pair closer than
+    r_i + r_j + skin with at least one owned particle is listed exactly once, on grids of a few cells a side
+    (most particles sit in boundary cells) and with ghosts."""
+    from pdemfem.neighbors.cells import cell_grid, cell_indices, sort_by_cell
+    from pdemfem.neighbors.verlet import _FORWARD_ROWS, _fill_pairs
+
+    rng = np.random.default_rng(seed)
+    count = 1500
+    positions = rng.random((count, 3)) * rng.uniform(0.002, 0.02, 3)
+    radii = rng.uniform(0.5e-3, 1.0e-3, count)
+    skin, owned = 0.3e-3, 1000
+    lower, size, dimensions = cell_grid(positions, 2.0 * radii.max() + skin)
+    cells = cell_indices(positions, lower, size, dimensions)
+    order, starts = sort_by_cell(cells, int(np.prod(dimensions)))
+    offsets = np.empty(count + 1, dtype=np.int64)
+    partners = np.empty(100 * count, dtype=np.int32)
+    written = _fill_pairs(np.ascontiguousarray(positions[order]), radii[order], skin, owned, order, cells[order],
+                          starts, dimensions, _FORWARD_ROWS, np.zeros(count, np.int32), np.zeros((1, 1)), False,
+                          offsets, partners)
+    listed = sorted((min(a, b), max(a, b)) for a, b in zip(np.repeat(order, np.diff(offsets)), partners[:written]))
+    i, j = np.triu_indices(count, k=1)
+    near = np.linalg.norm(positions[i] - positions[j], axis=1) < radii[i] + radii[j] + skin
+    near &= (i < owned) | (j < owned)
+    assert listed == sorted(zip(i[near].tolist(), j[near].tolist()))  # sorted lists: a pair listed twice fails
+
+
 def _sliding_pair(tangential_speed):
     """Two spheres in an oblique contact (relative normal speed 0.1 m/s, mu = 0.3) with spectators
     around them, so that a rebuild re-sorts the particles (cell order != id order).
