@@ -1,6 +1,7 @@
 """The contact kernels compiled for a scene's composition (pdemfem/contact/specialized.py) give the generic
-kernels' results bit for bit: folding the composition tests removes code that is never taken, and changes
-no arithmetic of the code that is."""
+kernels' results: folding the composition tests removes code that is never taken and changes no arithmetic
+of the code that is.  Both fuse multiplies and adds (FMA) where the compiler finds them, and the folded
+code gives it other places to do so: the results agree to round-off, not bit for bit."""
 from __future__ import annotations
 
 import os
@@ -54,7 +55,7 @@ def _kernel_results(kernels, system):
 
 
 @pytest.mark.parametrize("build", [_hertz_mindlin, _linear_with_rolling_spring, _adhesive_and_conducting])
-def test_the_specialized_kernels_give_the_generic_results_bit_for_bit(build, tmp_path):
+def test_the_specialized_kernels_give_the_generic_results(build, tmp_path):
     sim = Simulation.from_dict(build(), output_dir=tmp_path)
     system = sim.particle_system
     kernels = system.contact_kernels
@@ -67,7 +68,13 @@ def test_the_specialized_kernels_give_the_generic_results_bit_for_bit(build, tmp
     for specialized_value, generic_value in zip(specialized_results, generic_results):
         for a, b in zip(np.atleast_1d(np.asarray(specialized_value, dtype=object)),
                         np.atleast_1d(np.asarray(generic_value, dtype=object))):
-            assert np.array_equal(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+            a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+            # A contact's force is a chain of some 50 operations, each rounded once or (fused) not: a few
+            # ulp apart, summed over a particle's dozen contacts; 1e-12 of the array's scale bounds that,
+            # and any sub-model run or skipped by mistake moves the results by far more.
+            assert np.allclose(a, b, rtol=0.0, atol=1e-12 * max(np.abs(b).max(initial=0.0), 1e-300)), (a, b)
+    # Counts (pair and wall contacts) are decisions, not sums: equal.
+    assert specialized_results[0][2] == generic_results[0][2] and specialized_results[1][2] == generic_results[1][2]
 
 
 def test_a_composition_module_is_written_once_and_without_a_cache_folder_the_generic_kernels_run(

@@ -25,8 +25,14 @@ from pdemfem.contact.response import (add_particle_loads, clear_history, cohesiv
 # 11 % less time on the settle benchmark's bed, with identical results.
 COMPILED_COMPOSITION = -1
 
+# Let the compiler fuse a multiply and an add into one instruction (FMA, one rounding instead of two): the
+# pair loop took 12 % less time on the settle benchmark's bed.  The other fast-math licences stay off: no
+# reassociation, no reciprocal approximations, and NaN and infinity keep their meaning (the run monitor
+# stops a run on a non-finite value).  Results change in their last bits only.
+CONTRACT = {"contract"}
 
-@njit(cache=True)
+
+@njit(cache=True, fastmath=CONTRACT)
 def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history, ids, owned_count,
                 positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
                 coefficients, composition, dt, forces, torques, temperatures, heat_flows):
@@ -167,7 +173,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
     return elastic_total, dissipated_total, contacts, deepest
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=CONTRACT)
 def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_normals, wall_velocities,
                       wall_material, wall_history, positions, velocities, angular_velocities, radii, mass,
                       inverse_inertia, material_index, coefficients, composition, dt, forces, torques, wall_forces,
