@@ -80,8 +80,7 @@ def _phase_targets():
     from pdemfem.clumps.bodies import ClumpBodies
     from pdemfem.neighbors.verlet import VerletList
     from pdemfem.particles import system
-    return [(system, "pair_forces", "pair kernel"), (system, "plane_wall_forces", "walls"),
-            (system.ParticleSystem, "_rebuild", "rebuild"), (VerletList, "build", "  neighbour list build"),
+    return [(system.ParticleSystem, "_rebuild", "rebuild"), (VerletList, "build", "  neighbour list build"),
             (ClumpBodies, "refresh_rows", "  member refresh"),
             (system, "kick_drift", "sphere kick+drift"), (system, "kick", "sphere kick"),
             (ClumpBodies, "first_half", "clump first half"), (ClumpBodies, "sum_loads", "clump load sum"),
@@ -89,8 +88,23 @@ def _phase_targets():
 
 
 def install_phase_timers() -> None:
+    from pdemfem.particles import system
+
     for owner, name, label in _phase_targets():
         setattr(owner, name, _timed_call(getattr(owner, name), label))
+    # The contact kernels are those compiled for the scene's composition (pdemfem.contact.specialized): time
+    # them in the module the particle system gets (one module per composition, shared by both scenes).
+    kernels_for = system.contact_kernels
+    wrapped = set()
+
+    def timed_kernels(composition):
+        module = kernels_for(composition)
+        if module.__name__ not in wrapped:
+            wrapped.add(module.__name__)
+            module.pair_forces = _timed_call(module.pair_forces, "pair kernel")
+            module.plane_wall_forces = _timed_call(module.plane_wall_forces, "walls")
+        return module
+    system.contact_kernels = timed_kernels
 
 
 def timed(simulation, steps: int) -> tuple:
@@ -110,7 +124,7 @@ def print_phases(phases: dict, steps: int, members: dict) -> None:
     relative to the spheres'."""
     print(f"CPU time by phase, us per step (mean of the rounds; calls per {steps} steps)")
     print(f"{'':24} {'spheres':>9} {'calls':>6} {'clumps':>9} {'calls':>6}")
-    labels = [label for _, _, label in _phase_targets()]
+    labels = ["pair kernel", "walls"] + [label for _, _, label in _phase_targets()]
     totals = {kind: phases[kind].get("whole step", {"seconds": 0.0})["seconds"] for kind in phases}
     for kind in phases:
         top = sum(row["seconds"] for label, row in phases[kind].items()
