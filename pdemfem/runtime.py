@@ -32,19 +32,25 @@ def find_petsc_dir() -> str | None:
 
 
 @functools.lru_cache(maxsize=1)
+def source_digest() -> str:
+    """A digest of every source file of the package (16 hex digits): names the kernel cache folders."""
+    digest = hashlib.sha256()
+    package = Path(__file__).resolve().parent
+    for path in sorted(package.rglob("*.py")):
+        digest.update(str(path.relative_to(package)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+@functools.lru_cache(maxsize=1)
 def kernel_cache_directory() -> str | None:
     """Where numba caches the compiled kernels: one folder per version of the package's source.
 
     numba keys a cached kernel on its own file's time stamp only; a kernel that inlines a function from
     another module (the contact law into the wall kernels) would keep running the old law after that
     module changed.  A folder named by a digest of every source file of the package cannot go stale."""
-    digest = hashlib.sha256()
-    package = Path(__file__).resolve().parent
-    for path in sorted(package.rglob("*.py")):
-        digest.update(str(path.relative_to(package)).encode())
-        digest.update(path.read_bytes())
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    directory = os.path.join(base, "pdemfem", "numba", digest.hexdigest()[:16])
+    directory = os.path.join(base, "pdemfem", "numba", source_digest())
     try:
         os.makedirs(directory, exist_ok=True)
     except OSError:

@@ -5,6 +5,7 @@ code gives it other places to do so: the results agree to round-off, not bit for
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -85,5 +86,14 @@ def test_a_composition_module_is_written_once_and_without_a_cache_folder_the_gen
     specialized._write_once(path, "second = 2\n")  # another rank, later: the file (and its time stamp) stay
     assert path.read_text() == "first = 1\n" and os.stat(path).st_mtime_ns == stamp
     assert not list(tmp_path.glob("*.tmp"))
-    monkeypatch.setattr(specialized, "kernel_cache_directory", lambda: None)
+    monkeypatch.setattr(specialized, "module_folder", lambda: None)
     assert specialized.contact_kernels.__wrapped__(257) is forces
+
+
+def test_the_modules_go_beside_a_numba_cache_a_job_points_elsewhere(tmp_path, monkeypatch):
+    from pdemfem.runtime import kernel_cache_directory, source_digest
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert specialized.module_folder() == tmp_path / f"pdemfem-specialized-{source_digest()}"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", kernel_cache_directory())  # pdemfem's own default (pdemfem.launch)
+    assert specialized.module_folder() == Path(kernel_cache_directory()) / "specialized"

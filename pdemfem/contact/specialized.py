@@ -5,12 +5,12 @@ contact; compiled for a fixed one, the compiler folds those tests and drops the 
 and the pair loop of the settle benchmark's bed took 11 % less time (docs/performance.md).  numba
 folds a module's global constants, but caches a kernel on disk only when it lives in a file of its
 own: so each composition gets a copy of pdemfem/contact/forces.py with COMPILED_COMPOSITION set,
-written once into the kernel cache folder (one per version of the package's source,
-pdemfem.runtime.kernel_cache_directory), and imported from there.  The first run of a composition
+written once into a folder per version of the package's source (module_folder), and imported from
+there.  The first run of a composition
 compiles its kernels (a few seconds); later runs load them from the cache like every other kernel.
 
-Results are identical to the generic kernels' (tests/test_contact_specialized.py).  Without a
-writable cache folder the generic kernels run.
+Results agree with the generic kernels' to round-off (tests/test_contact_specialized.py).  Without a
+writable folder the generic kernels run (on every rank: ParticleSystem agrees on one choice).
 """
 from __future__ import annotations
 
@@ -19,11 +19,12 @@ import importlib.util
 import logging
 import os
 import sys
+import tempfile
 from pathlib import Path
 from types import ModuleType
 
 from pdemfem.contact import forces
-from pdemfem.runtime import kernel_cache_directory
+from pdemfem.runtime import kernel_cache_directory, source_digest
 
 log = logging.getLogger("pdemfem")
 
@@ -38,31 +39,43 @@ def specialized_source(composition: int) -> str:
     return source.replace(_MARKER, f"COMPILED_COMPOSITION = {int(composition)}\n")
 
 
+def module_folder() -> Path | None:
+    """Where the composition modules go (None: nowhere writable).  One folder per version of the package's
+    source: beside numba's cache when a job points NUMBA_CACHE_DIR elsewhere (a cluster's shared cache,
+    jobs/env.sh), in the kernel cache folder otherwise."""
+    configured = os.environ.get("NUMBA_CACHE_DIR")
+    default = kernel_cache_directory()
+    if configured and (default is None or os.path.abspath(configured) != os.path.abspath(default)):
+        return Path(configured) / f"pdemfem-specialized-{source_digest()}"
+    return None if default is None else Path(default) / "specialized"
+
+
 def _write_once(path: Path, text: str) -> None:
-    """Create `path` holding `text` unless it exists, atomically: the ranks of a run race to write it, and
-    numba keys its cache on the file's time stamp, so a file rewritten after one rank compiled it would
-    make the next run compile again."""
+    """Create `path` holding `text` unless it exists, atomically: the ranks of a run (on one node or on
+    several sharing the folder) race to write it, and numba keys its cache on the file's time stamp, so a
+    file rewritten after one rank compiled it would make the next run compile again."""
     if path.exists():
         return
-    temporary = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    temporary.write_text(text)
+    descriptor, temporary = tempfile.mkstemp(prefix=f"{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        with os.fdopen(descriptor, "w") as stream:
+            stream.write(text)
         os.link(temporary, path)  # fails if another process created it first
     except FileExistsError:
         pass
     finally:
-        temporary.unlink()
+        os.unlink(temporary)
 
 
 @functools.lru_cache(maxsize=None)
 def contact_kernels(composition: int) -> ModuleType:
     """A module with pair_forces and plane_wall_forces compiled for `composition` (the generic module,
     pdemfem.contact.forces, when no cache folder is writable)."""
-    cache = kernel_cache_directory()
-    if cache is None:
+    folder = module_folder()
+    if folder is None:
         return forces
     name = f"pdemfem_contact_forces_{int(composition)}"
-    path = Path(cache) / "specialized" / f"{name}.py"
+    path = folder / f"{name}.py"
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         _write_once(path, specialized_source(composition))

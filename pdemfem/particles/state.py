@@ -153,6 +153,7 @@ class ParticleState(kinds.StateComponent):
             raise KeyError(f"no per-particle field '{name}' added with add_field")
         del self.registry[name]
         self.registry_version += 1
+        self._buffers.pop(name, None)
         return self.fields.pop(name)
 
     def array(self, name: str) -> np.ndarray:
@@ -187,11 +188,13 @@ class ParticleState(kinds.StateComponent):
         assert self.ghost_count == 0, "reorder owned particles only"
         for name, values in self._all_arrays():
             self._set(name, np.ascontiguousarray(values[permutation]))
+        self._buffers.clear()  # every array is new (the next append gives it spare rows)
 
     def keep(self, rows: np.ndarray) -> None:
         """Keep only the given rows (owned); drops ghosts."""
         for name, values in self._all_arrays():
             self._set(name, np.ascontiguousarray(values[rows]))
+        self._buffers.clear()
         self.owned_count = len(rows)
 
     def drop_ghosts(self) -> None:
@@ -304,4 +307,5 @@ class ParticleState(kinds.StateComponent):
             else:
                 self._set(name, np.zeros((count, *values.shape[1:]), dtype=values.dtype))
         self.positions_at_build = self.positions.copy()
+        self._buffers.clear()
         self.owned_count = count

@@ -39,6 +39,7 @@ from mpi4py import MPI
 
 from pdemfem.contact import layout
 from pdemfem import state_dict as kinds
+from pdemfem.contact import forces as generic_contact_kernels
 from pdemfem.contact.specialized import contact_kernels
 from pdemfem.contact.registry import history_signs
 from pdemfem.neighbors.cells import cell_grid, cell_indices, out_of_order_runs, sort_by_cell
@@ -76,6 +77,13 @@ class ParticleSystem(kinds.StateComponent):
         self.walls = walls
         self.tables = tables
         self.contact_kernels = contact_kernels(tables.composition)  # pair_forces, plane_wall_forces
+        if comm.size > 1 and not comm.allreduce(self.contact_kernels is not generic_contact_kernels, op=MPI.LAND):
+            # Where some rank could not write the composition's module, all run the generic kernels: the ranks
+            # compute the pairs they share with one code (the two agree only to round-off).
+            if self.contact_kernels is not generic_contact_kernels and comm.rank == 0:
+                log.warning("contact kernels: some ranks have no writable kernel folder; every rank runs the "
+                            "generic pair and wall kernels (a slower pair loop, docs/contact_models.md)")
+            self.contact_kernels = generic_contact_kernels
         self.gravity = np.asarray(gravity, dtype=float)
         self.dt = float(dt)
         self.skin = float(skin)

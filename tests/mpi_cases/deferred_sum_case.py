@@ -7,7 +7,7 @@ usage: deferred_sum_case.py OUT.json
 The scene has every reader of the summed values: grains between a spinning cylinder drum, a moving, spinning
 mesh lid and a conveyor floor (a plane whose surface moves: its work on the grains is booked from the summed
 forces); between calls of Simulation.step the case reads the energies, the contact count, every wall's force,
-torque and work, and the history row's mean surface forces.
+torque and work, and the history row's mean surface forces.  A stream inserts grains every 10 steps.
 """
 import json
 import sys
@@ -30,13 +30,20 @@ def scene(folder: Path) -> dict:
     del data["solids"], data["coupling"]
     data["walls"].append({"name": "floor", "kind": "plane", "point": [0, 0, 0.02], "normal": [0, 0, 1],
                           "material": "grain", "transport_velocity": [0.5, 0.0, 0.0]})
+    # A stream inserting above the pile every few steps: its insertion (collective) runs while a step's SUM
+    # would otherwise still be in flight.
+    data["particles"].append({"name": "feed", "material": "grain", "radius": 0.0045,
+                              "insert": {"kind": "stream", "region": {"box": [[0.07, 0.07, 0.052], [0.13, 0.13, 0.064]]},
+                                         "rate": 20000.0, "velocity": [0.0, 0.0, -1.0], "seed": 2,
+                                         "interval": 10 * restart_scenes.DT}})
     return restart_scenes.add_moving_walls(data, folder)
 
 
 def readings(simulation) -> list:
     """Everything a user or the run loop reads between steps that comes from the step's sums."""
     system = simulation.particle_system
-    values = list(simulation.energies().values()) + [simulation.contact_count(), system.walls.work]
+    values = list(simulation.energies().values()) + [simulation.contact_count(), system.walls.work,
+                                                     simulation.particle_count()]
     for name in ("drum", "lid"):
         values += list(simulation.wall_force(name)) + list(simulation.wall_torque(name))
     values += list(simulation.wall_force("floor"))
