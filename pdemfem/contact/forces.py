@@ -22,7 +22,8 @@ from pdemfem.contact.response import (add_particle_loads, clear_history, cohesiv
 # The composition these kernels are compiled for; -1: the `composition` argument, read at run time.  The
 # particle system runs a copy of this module with it set to the scene's (pdemfem.contact.specialized), so
 # the compiler folds every composition test and drops the unused sub-models' code: the pair loop took
-# 11 % less time on the settle benchmark's bed, with identical results.
+# 11 % less time on the settle benchmark's bed (results agree to round-off: the multiply-adds below are
+# fused in other places once the code is folded).
 COMPILED_COMPOSITION = -1
 
 # Let the compiler fuse a multiply and an add into one instruction (FMA, one rounding instead of two): the

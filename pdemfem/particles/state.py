@@ -106,7 +106,7 @@ class ParticleState(kinds.StateComponent):
         self.registry_version = 0  # bumped when a field is added or removed (the ghost scatter re-plans)
         self.fields = {}  # the arrays of the fields registered with add_field
         # name -> the buffer an array is the leading rows of, with spare rows for the next append
-        # (`_extended`): the ghosts appended at every rebuild then copy nothing but themselves.
+        # (`_append_to`): the ghosts appended at every rebuild then copy nothing but themselves.
         self._buffers = {}
         self.owned_count = count
         if temperatures is not None:
@@ -199,7 +199,7 @@ class ParticleState(kinds.StateComponent):
 
     def drop_ghosts(self) -> None:
         # The owned rows lead every array: a slice of them is a contiguous view, no copy (the next append
-        # makes fresh arrays).
+        # writes into the rows after it, _append_to).
         if self.ghost_count:
             for name, values in self._all_arrays():
                 self._set(name, values[:self.owned_count])
@@ -228,20 +228,21 @@ class ParticleState(kinds.StateComponent):
             packed[:, start:start + columns] = self.array(name)[rows].reshape(len(rows), columns)
         return packed
 
-    def _extended(self, name: str, count: int) -> np.ndarray:
-        """The field's array with `count` more rows (their values undefined), taken from the spare rows of its
-        buffer when it has them: the array is then a longer view of the same buffer and no row is copied."""
+    def _append_to(self, name: str, count: int, rows) -> None:
+        """Append `count` rows to the field: `rows` (cast to the field's dtype) or one value for all of them.
+        They go into the spare rows of the array's buffer when it has them: the array becomes a longer view
+        of the same buffer and no existing row is copied."""
         values = self.array(name)
-        rows = len(values)
+        held = len(values)
         buffer = self._buffers.get(name)
-        if (buffer is not None and values.base is buffer and rows + count <= len(buffer)
+        if not (buffer is not None and values.base is buffer and held + count <= len(buffer)
                 and values.__array_interface__["data"][0] == buffer.__array_interface__["data"][0]):
-            return buffer[:rows + count]
-        # A fifth more than needed: the ghosts of the next rebuilds (their count drifts) fit without a copy.
-        buffer = np.empty((rows + count + (rows + count) // 5 + 16, *values.shape[1:]), dtype=values.dtype)
-        buffer[:rows] = values
-        self._buffers[name] = buffer
-        return buffer[:rows + count]
+            # A fifth more than needed: the ghosts of the next rebuilds (their count drifts) fit without a copy.
+            buffer = np.empty((held + count + (held + count) // 5 + 16, *values.shape[1:]), dtype=values.dtype)
+            buffer[:held] = values
+            self._buffers[name] = buffer
+        buffer[held:held + count] = rows
+        self._set(name, buffer[:held + count])
 
     def append_rows(self, packed: np.ndarray, layout, as_ghosts: bool) -> None:
         """Append unpacked rows; fields not in the layout get zeros."""
@@ -253,14 +254,10 @@ class ParticleState(kinds.StateComponent):
             new = packed[:, start:start + columns].reshape((count, *tail))
             if np.issubdtype(dtype, np.integer):
                 new = np.rint(new)
-            values = self._extended(name, count)
-            values[-count:] = new
-            self._set(name, values)
-        for name, _ in list(self._all_arrays()):
+            self._append_to(name, count, new)
+        for name in self.registry:
             if name not in given:
-                values = self._extended(name, count)
-                values[-count:] = 0
-                self._set(name, values)
+                self._append_to(name, count, 0)
         if not as_ghosts:
             self.owned_count += count
 
@@ -268,10 +265,8 @@ class ParticleState(kinds.StateComponent):
         """Append the particles of `new` (built by the constructor, so its core fields are complete) as
         owned rows (ghosts must have been dropped first); every field added with add_field gets its fill."""
         assert self.ghost_count == 0, "append owned particles only"
-        for name, values in self._all_arrays():
-            rows = (new.array(name) if name in new.registry
-                    else np.full((new.count, *values.shape[1:]), self.registry[name].fill, dtype=values.dtype))
-            self._set(name, np.ascontiguousarray(np.concatenate([values, rows.astype(values.dtype, copy=False)])))
+        for name in self.registry:
+            self._append_to(name, new.count, new.array(name) if name in new.registry else self.registry[name].fill)
         self.owned_count += new.count
 
     def nbytes(self) -> int:

@@ -77,12 +77,14 @@ class ParticleSystem(kinds.StateComponent):
         self.walls = walls
         self.tables = tables
         self.contact_kernels = contact_kernels(tables.composition)  # pair_forces, plane_wall_forces
-        if comm.size > 1 and not comm.allreduce(self.contact_kernels is not generic_contact_kernels, op=MPI.LAND):
+        specialized_ranks = comm.allreduce(int(self.contact_kernels is not generic_contact_kernels))
+        if 0 < specialized_ranks < comm.size:
             # Where some rank could not write the composition's module, all run the generic kernels: the ranks
             # compute the pairs they share with one code (the two agree only to round-off).
-            if self.contact_kernels is not generic_contact_kernels and comm.rank == 0:
-                log.warning("contact kernels: some ranks have no writable kernel folder; every rank runs the "
-                            "generic pair and wall kernels (a slower pair loop, docs/contact_models.md)")
+            if comm.rank == 0:
+                log.warning("contact kernels: %d of %d ranks have no writable kernel folder; every rank runs the "
+                            "generic pair and wall kernels (a slower pair loop, docs/contact_models.md)",
+                            comm.size - specialized_ranks, comm.size)
             self.contact_kernels = generic_contact_kernels
         self.gravity = np.asarray(gravity, dtype=float)
         self.dt = float(dt)
@@ -534,4 +536,3 @@ class ParticleSystem(kinds.StateComponent):
             "dissipated_energy": self.dissipated_energy,
             "wall_work": self.walls.work,
         }
-
