@@ -25,36 +25,45 @@ def _in_use(history, row):
 
 
 @njit(cache=True)
-def collect_records(row_particles, offsets, partners, history, ids, owned_count, signs):
-    """Records of every contact with history in use, one per owned particle of the pair."""
+def collect_records_into(row_particles, offsets, partners, history, ids, owned_count, signs, records):
+    """Write the records of every contact with history in use, one per owned particle of the pair, into the
+    leading rows of `records` (as many as fit); returns how many there are (may exceed its rows)."""
     width = history.shape[1]
-    count = 0
-    for r in range(row_particles.shape[0]):
-        i = row_particles[r]
-        for row in range(offsets[r], offsets[r + 1]):
-            if _in_use(history, row):
-                count += (i < owned_count) + (partners[row] < owned_count)
-    records = np.empty((count, RECORD_KEYS + width))
+    capacity = records.shape[0]
     written = 0
     for r in range(row_particles.shape[0]):
         i = row_particles[r]
+        i_owned = i < owned_count
         for row in range(offsets[r], offsets[r + 1]):
             if not _in_use(history, row):
                 continue
             j = partners[row]
-            if i < owned_count:
-                records[written, 0] = ids[i]
-                records[written, 1] = ids[j]
-                for column in range(width):
-                    records[written, RECORD_KEYS + column] = history[row, column]
+            if i_owned:
+                if written < capacity:
+                    records[written, 0] = ids[i]
+                    records[written, 1] = ids[j]
+                    for column in range(width):
+                        records[written, RECORD_KEYS + column] = history[row, column]
                 written += 1
             if j < owned_count:
-                # The springs are the first particle's relative to the second: they flip.
-                records[written, 0] = ids[j]
-                records[written, 1] = ids[i]
-                for column in range(width):
-                    records[written, RECORD_KEYS + column] = signs[column] * history[row, column]
+                if written < capacity:
+                    # The springs are the first particle's relative to the second: they flip.
+                    records[written, 0] = ids[j]
+                    records[written, 1] = ids[i]
+                    for column in range(width):
+                        records[written, RECORD_KEYS + column] = signs[column] * history[row, column]
                 written += 1
+    return written
+
+
+@njit(cache=True)
+def collect_records(row_particles, offsets, partners, history, ids, owned_count, signs):
+    """Records of every contact with history in use, one per owned particle of the pair (a new array)."""
+    width = history.shape[1]
+    count = collect_records_into(row_particles, offsets, partners, history, ids, owned_count, signs,
+                                 np.empty((0, RECORD_KEYS + width)))
+    records = np.empty((count, RECORD_KEYS + width))
+    collect_records_into(row_particles, offsets, partners, history, ids, owned_count, signs, records)
     return records
 
 

@@ -40,24 +40,79 @@ def kick_drift_row(i, positions, velocities, angular_velocities, forces, torques
 @njit(cache=True)
 def kick(owned_count, velocities, angular_velocities, forces, torques, inverse_mass, inverse_inertia, gravity,
          half_dt):
-    """v += dt/2 (F/m + g); w += dt/2 T/I."""
+    """v += dt/2 (F/m + g); w += dt/2 T/I.
+
+    The (n, 3) arrays are walked as flat rows with the three components written out: the compiler then knows
+    the row length and vectorises the loop (35 against 83 us for 28,000 rows, the same bits)."""
+    velocity = velocities.reshape(-1)
+    spin = angular_velocities.reshape(-1)
+    force = forces.reshape(-1)
+    torque = torques.reshape(-1)
+    gravity_x, gravity_y, gravity_z = gravity[0], gravity[1], gravity[2]
     for i in range(owned_count):
-        for axis in range(3):
-            velocities[i, axis] += half_dt * (forces[i, axis] * inverse_mass[i] + gravity[axis])
-            angular_velocities[i, axis] += half_dt * torques[i, axis] * inverse_inertia[i]
+        k = 3 * i
+        inverse_mass_i = inverse_mass[i]
+        inverse_inertia_i = inverse_inertia[i]
+        velocity[k] += half_dt * (force[k] * inverse_mass_i + gravity_x)
+        velocity[k + 1] += half_dt * (force[k + 1] * inverse_mass_i + gravity_y)
+        velocity[k + 2] += half_dt * (force[k + 2] * inverse_mass_i + gravity_z)
+        spin[k] += half_dt * torque[k] * inverse_inertia_i
+        spin[k + 1] += half_dt * torque[k + 1] * inverse_inertia_i
+        spin[k + 2] += half_dt * torque[k + 2] * inverse_inertia_i
 
 
 @njit(cache=True)
 def kick_drift(owned_count, positions, velocities, angular_velocities, forces, torques, inverse_mass,
                inverse_inertia, gravity, half_dt, dt, positions_at_build):
     """The first half kick and the drift in one pass over the particles (the same arithmetic as kick,
-    then drift); the loads it used are zeroed for the next force evaluation.  Returns what drift returns."""
+    then drift); the loads it used are zeroed for the next force evaluation.  Returns what drift returns.
+
+    Written as kick is (flat rows, components spelled out) and with the non-finite test kept apart from the
+    running maximum, so the loop has no branch: 97 against 121 us for 28,000 rows, the same bits."""
+    position = positions.reshape(-1)
+    velocity = velocities.reshape(-1)
+    spin = angular_velocities.reshape(-1)
+    force = forces.reshape(-1)
+    torque = torques.reshape(-1)
+    position_at_build = positions_at_build.reshape(-1)
+    gravity_x, gravity_y, gravity_z = gravity[0], gravity[1], gravity[2]
     largest = 0.0
+    finite = True
     for i in range(owned_count):
-        largest = keep_largest(largest, kick_drift_row(i, positions, velocities, angular_velocities, forces, torques,
-                                                       inverse_mass, inverse_inertia, gravity, half_dt, dt,
-                                                       positions_at_build))
-    return largest
+        k = 3 * i
+        inverse_mass_i = inverse_mass[i]
+        inverse_inertia_i = inverse_inertia[i]
+        velocity_x = velocity[k] + half_dt * (force[k] * inverse_mass_i + gravity_x)
+        velocity_y = velocity[k + 1] + half_dt * (force[k + 1] * inverse_mass_i + gravity_y)
+        velocity_z = velocity[k + 2] + half_dt * (force[k + 2] * inverse_mass_i + gravity_z)
+        velocity[k] = velocity_x
+        velocity[k + 1] = velocity_y
+        velocity[k + 2] = velocity_z
+        spin[k] += half_dt * torque[k] * inverse_inertia_i
+        spin[k + 1] += half_dt * torque[k + 1] * inverse_inertia_i
+        spin[k + 2] += half_dt * torque[k + 2] * inverse_inertia_i
+        force[k] = 0.0
+        force[k + 1] = 0.0
+        force[k + 2] = 0.0
+        torque[k] = 0.0
+        torque[k + 1] = 0.0
+        torque[k + 2] = 0.0
+        x = position[k] + dt * velocity_x
+        y = position[k + 1] + dt * velocity_y
+        z = position[k + 2] + dt * velocity_z
+        position[k] = x
+        position[k + 1] = y
+        position[k + 2] = z
+        offset_x = x - position_at_build[k]
+        offset_y = y - position_at_build[k + 1]
+        offset_z = z - position_at_build[k + 2]
+        # Summed in drift's order (x, then y, then z): the same bits.
+        displacement_squared = offset_x * offset_x + offset_y * offset_y
+        displacement_squared += offset_z * offset_z
+        finite &= displacement_squared < np.inf
+        largest = max(largest, displacement_squared)
+    # keep_largest's rule: inf once a displacement is not finite (NaN would be lost by the maximum).
+    return largest if finite else np.inf
 
 
 @njit(cache=True)
