@@ -345,3 +345,27 @@ def test_member_index_follows_the_rows_and_stands_while_they_stay(tmp_path):
     clumps.refresh_rows(state)
     assert clumps.member_rows is not kept
     check_index()
+
+
+def test_free_spheres_beside_clumps_fall_as_spheres(tmp_path):
+    """A scene of clumps and plain spheres: the spheres take both half kicks of the sphere integrator (the
+    second half skips them only when every owned row is a clump member).  Free fall far from everything:
+    velocity Verlet is exact for a constant force, so after n steps v = g n dt and the drop is g (n dt)^2 / 2,
+    to the round-off of n additions (n eps of the scale)."""
+    spheres = {"name": "spheres", "material": "glass", "radius": RADIUS,
+               "insert": {"kind": "list", "positions": [[0.1, 0.0, 0.5], [0.2, 0.0, 0.5]]}}
+    clumps = {"name": "clumps", "material": "glass", "clump": dumbbell(),
+              "insert": {"kind": "list", "positions": [[-0.1, 0.0, 0.5]]}}
+    simulation = build(scene([clumps, spheres], {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.5}),
+                       tmp_path)
+    steps = 200
+    simulation.step(steps)
+    elapsed = steps * simulation.dt
+    particles = simulation.particles
+    free = particles.positions[:, 0] > 0.05  # the spheres (the dumbbell sits at x = -0.1)
+    assert np.count_nonzero(free) == 2
+    tolerance = steps * EPS
+    assert np.allclose(particles.velocities[free, 2], -9.81 * elapsed, rtol=tolerance, atol=0.0)
+    assert np.allclose(particles.positions[free, 2], 0.5 - 0.5 * 9.81 * elapsed ** 2, rtol=tolerance, atol=0.0)
+    # the dumbbell falls alike (its members' velocities come from the body)
+    assert np.allclose(particles.velocities[~free, 2], -9.81 * elapsed, rtol=tolerance, atol=0.0)

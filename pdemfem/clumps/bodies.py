@@ -260,8 +260,10 @@ class ClumpBodies(kinds.StateComponent):
                        state.torques, self.forces, self.torques)
 
     def second_half(self, state, gravity, dt) -> None:
-        kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities, state.angular_velocities,
-                          state.forces, state.torques, state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt)
+        if len(self.member_rows) < state.owned_count:  # some owned rows are free spheres
+            kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities,
+                              state.angular_velocities, state.forces, state.torques, state.inverse_mass,
+                              state.inverse_inertia, gravity, 0.5 * dt)
         second_half_bodies(self.count, self.velocities, self.angular_momenta, self.forces, self.torques,
                            self.inverse_masses, gravity, 0.5 * dt, self.rotations, self.principal_moments,
                            self.angular_velocities, self.member_start, self.member_rows, self.member_levers,
