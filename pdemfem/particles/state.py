@@ -191,11 +191,14 @@ class ParticleState(kinds.StateComponent):
         self._buffers.clear()  # every array is new (the next append gives it spare rows)
 
     def keep(self, rows: np.ndarray) -> None:
-        """Keep only the given rows (owned); drops ghosts."""
+        """Keep only the given rows (owned), in place: the kept rows move to the front of each array, which
+        stays a view of its buffer, so the particles that arrive next (migration) fill its spare rows instead
+        of a copy of every array (a rebuild that migrates copied each array twice).  Drops ghosts."""
+        count = len(rows)
         for name, values in self._all_arrays():
-            self._set(name, np.ascontiguousarray(values[rows]))
-        self._buffers.clear()
-        self.owned_count = len(rows)
+            values[:count] = values[rows]  # numpy gathers into a temporary first: any order of rows is safe
+            self._set(name, values[:count])
+        self.owned_count = count
 
     def drop_ghosts(self) -> None:
         # The owned rows lead every array: a slice of them is a contiguous view, no copy (the next append
