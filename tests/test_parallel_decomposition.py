@@ -193,3 +193,21 @@ def test_lost_particles_are_removed_and_counted(results):
         assert 0 not in blown_ids and len(blown_ids) == total - 1, "the NaN particle (id 0) is removed"
         assert int(result["blown_lost"]) == 1 and int(result["blown_nonfinite"]) == 1
         assert bool(result["blown_finite"])
+
+
+def test_rows_near_box_selects_what_box_distance_selects():
+    """The ghost selection's one-pass kernel against box_distance's numpy arithmetic: the same rows, also for
+    boxes open to infinity, shifted (periodic) images, points on the cutoff and non-finite points."""
+    from pdemfem.parallel.decomposition import box_distance, rows_near_box
+
+    rng = np.random.default_rng(17)
+    points = rng.uniform(-2.0, 3.0, (5000, 3))
+    points[10] = [np.nan, 0.5, 0.5]
+    points[11] = [np.inf, 0.5, 0.5]
+    points[12] = [1.25, 0.5, 0.5]  # exactly the cutoff beyond the upper x face
+    for lower, upper in (([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]), ([-np.inf, 0.0, -np.inf], [1.0, np.inf, np.inf])):
+        lower, upper = np.array(lower), np.array(upper)
+        for shift in (np.zeros(3), np.array([-2.5, 0.0, 0.0])):
+            expected = np.flatnonzero(box_distance(points + shift, lower, upper) < 0.25)
+            assert np.array_equal(rows_near_box(points, shift, lower, upper, 0.25), expected)
+            assert 0 < len(expected) < len(points)

@@ -10,6 +10,8 @@ periodic domain), so every point in space has exactly one owner.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from mpi4py import MPI
 from numba import njit
@@ -181,6 +183,30 @@ def box_distance(points: np.ndarray, box_lower: np.ndarray, box_upper: np.ndarra
     above = np.maximum(points - box_upper, 0.0)
     gap = np.where(np.isfinite(below), below, 0.0) + np.where(np.isfinite(above), above, 0.0)
     return np.sqrt(np.sum(gap * gap, axis=-1))
+
+
+@njit(cache=True)
+def rows_near_box(points, shift, box_lower, box_upper, cutoff):
+    """The rows of the points that, moved by `shift`, lie closer than `cutoff` to the box: box_distance's
+    arithmetic (the same decisions, bit for bit) in one pass, where numpy's took six temporaries and 30 ns
+    per point (the ghost selection of every rebuild on every rank)."""
+    count = points.shape[0]
+    rows = np.empty(count, dtype=np.int64)
+    found = 0
+    for i in range(count):
+        total = 0.0
+        for axis in range(3):
+            point = points[i, axis] + shift[axis]
+            below = box_lower[axis] - point
+            above = point - box_upper[axis]
+            # np.maximum(., 0) keeps NaN, which the finite test then drops, as it drops inf
+            below = below if below > 0.0 or below != below else 0.0
+            above = above if above > 0.0 or above != above else 0.0
+            gap = (below if np.isfinite(below) else 0.0) + (above if np.isfinite(above) else 0.0)
+            total += gap * gap
+        rows[found] = i
+        found += math.sqrt(total) < cutoff
+    return rows[:found]
 
 
 @njit(cache=True)

@@ -14,7 +14,7 @@ import itertools
 import numpy as np
 from mpi4py import MPI
 
-from pdemfem.parallel.decomposition import box_distance
+from pdemfem.parallel.decomposition import rows_near_box
 from pdemfem.parallel.index_map import ForwardScatter, ParticleIndexMap
 
 # Fixed tags are safe: the particle system talks on a private duplicate of the user's communicator
@@ -137,7 +137,7 @@ class GhostExchange:
         rows = {neighbour: [] for neighbour in self.neighbours}
         shifts = {neighbour: [] for neighbour in self.neighbours}
         for other, shift, lower, upper in self.targets:
-            near = np.flatnonzero(box_distance(positions + shift, lower, upper) < self.cutoff)
+            near = rows_near_box(positions, np.asarray(shift, dtype=np.float64), lower, upper, self.cutoff)
             rows[other].append(near)
             shifts[other].append(np.tile(shift, (len(near), 1)))
         send_rows = {n: np.concatenate(rows[n]).astype(np.int64) if rows[n] else np.zeros(0, np.int64)
