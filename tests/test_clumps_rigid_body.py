@@ -379,10 +379,15 @@ def test_step_kernels_body_by_body_are_the_member_kernels_bit_for_bit():
 
     new_rows = [np.full((rows, 3), 5.0) for _ in range(3)]
     spins = np.empty((count, 3))
+    used_loads = [np.full((rows, 3), 7.0) for _ in range(2)]
     largest = first_half_bodies(count, bodies["positions"], bodies["velocities"], bodies["orientations"],
                                 bodies["momenta"], forces, torques, inverse_masses, moments, gravity, half_dt, dt,
                                 rotations, spins, np.empty((ROTATION_ROWS, count)), member_start, member_rows,
-                                member_offsets, levers, *new_rows, at_build)
+                                member_offsets, levers, *new_rows, at_build, *used_loads)
+    member_mask = np.zeros(rows, dtype=bool)
+    member_mask[member_rows[:member_start[-1]]] = True
+    for loads in used_loads:  # the members' loads are zeroed for the next evaluation, the free rows' kept
+        assert not loads[member_mask].any() and np.all(loads[~member_mask] == 7.0)
     assert largest == old_largest
     for name in bodies:
         assert np.array_equal(bodies[name], old[name])  # exact

@@ -11,14 +11,14 @@ A member's row carries its mass share (pdemfem.clumps.template) as its mass and 
 its inertia, which the contact laws read; the sphere integrator skips members.  One step
 (ParticleSystem.step with clumps):
 
-    first_half    free spheres: half kick and drift (kick_drift_free_spheres, which zeroes every owned
-                  row's loads, as kick_drift does); bodies and their members in one kernel
+    first_half    free spheres, if any: half kick and drift (kick_drift_free_spheres, which zeroes every
+                  owned row's loads, as kick_drift does); bodies and their members in one kernel
                   (first_half_bodies): half kick, drift, R(q), omega from L (the rotation vectorised over
                   the bodies), then each body's member rows (position, velocity, spin; the lever R(q)
-                  offset kept per member)
+                  offset kept per member; the loads zeroed)
     (list rebuild or ghost update; every contact force on the rows)
     sum_loads     body F, T <- the owned members' loads, body by body (sum_body_loads)
-    second_half   free spheres: half kick; bodies: half kick and omega (with the R of the first half),
+    second_half   free spheres, if any: half kick; bodies: half kick and omega (with the R of the first half),
                   then their members' velocities and spins (second_half_bodies)
 
 The body kernels reach a body's members through the member index refresh_rows makes at a list
@@ -242,16 +242,18 @@ class ClumpBodies(kinds.StateComponent):
         """Half kick and drift of the free spheres and the bodies (zeroing the owned rows' loads, as
         kick_drift does); members follow their bodies.  Returns the largest squared displacement of a
         row since the list build."""
-        largest = kick_drift_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.positions,
-                                          state.velocities, state.angular_velocities, state.forces, state.torques,
-                                          state.inverse_mass, state.inverse_inertia, gravity, 0.5 * dt, dt,
-                                          state.positions_at_build)
+        largest = 0.0
+        if len(self.member_rows) < state.owned_count:  # some owned rows are free spheres
+            largest = kick_drift_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.positions,
+                                              state.velocities, state.angular_velocities, state.forces,
+                                              state.torques, state.inverse_mass, state.inverse_inertia, gravity,
+                                              0.5 * dt, dt, state.positions_at_build)
         members = first_half_bodies(self.count, self.positions, self.velocities, self.orientations,
                                     self.angular_momenta, self.forces, self.torques, self.inverse_masses,
                                     self.principal_moments, gravity, 0.5 * dt, dt, self.rotations,
                                     self.angular_velocities, self._rotation_work, self.member_start, self.member_rows,
                                     self.member_offsets, self.member_levers, state.positions, state.velocities,
-                                    state.angular_velocities, state.positions_at_build)
+                                    state.angular_velocities, state.positions_at_build, state.forces, state.torques)
         return max(largest, members)
 
     def sum_loads(self, state) -> None:

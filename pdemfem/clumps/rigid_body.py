@@ -240,14 +240,14 @@ def kick_drift_bodies(count, positions, velocities, orientations, angular_moment
     first_half_bodies(count, positions, velocities, orientations, angular_momenta, forces, torques, inverse_masses,
                       principal_moments, gravity, half_dt, dt, rotations, angular_velocities, work, no_members,
                       np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
-                      np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+                      np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
 
 
 @njit(cache=True)
 def first_half_bodies(count, positions, velocities, orientations, angular_momenta, forces, torques, inverse_masses,
                       principal_moments, gravity, half_dt, dt, rotations, angular_velocities, work, member_start,
                       member_rows, member_offsets, levers, row_positions, row_velocities, row_angular_velocities,
-                      positions_at_build):
+                      positions_at_build, row_forces, row_torques):
     """The step's first half over the bodies and their members: kick_bodies(dt/2) and drift_bodies(dt)
     (the same arithmetic, the same values), rotations[i] = R(q) of the new orientation, omega from L,
     and place_members for the members of each body (its members are member_rows[member_start[i]:
@@ -267,6 +267,7 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     offset, lever = member_offsets.reshape(-1), levers.reshape(-1)
     row_position, row_velocity = row_positions.reshape(-1), row_velocities.reshape(-1)
     row_spin, position_at_build = row_angular_velocities.reshape(-1), positions_at_build.reshape(-1)
+    row_force, row_torque = row_forces.reshape(-1), row_torques.reshape(-1)
     gravity_x, gravity_y, gravity_z = gravity[0], gravity[1], gravity[2]
     work_w, work_x, work_y, work_z = work[0], work[1], work[2], work[3]
     work_l0, work_l1, work_l2 = work[4], work[5], work[6]
@@ -362,6 +363,13 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
             row_spin[row] = omega0
             row_spin[row + 1] = omega1
             row_spin[row + 2] = omega2
+            # the member's loads are used up (summed onto the body): zeroed for the next evaluation
+            row_force[row] = 0.0
+            row_force[row + 1] = 0.0
+            row_force[row + 2] = 0.0
+            row_torque[row] = 0.0
+            row_torque[row + 1] = 0.0
+            row_torque[row + 2] = 0.0
     return largest
 
 
