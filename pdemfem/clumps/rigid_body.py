@@ -232,6 +232,14 @@ def free_rotation_columns(count, work, dt):
         work[7, i] = 0.0 if small else 1.0
 
 
+@njit(inline="always", cache=True)
+def _half_kick(v0, v1, v2, l0, l1, l2, f0, f1, f2, t0, t1, t2, inverse_mass, gravity_x, gravity_y, gravity_z,
+               half_dt):
+    """kick_bodies' arithmetic on one body's numbers: (v + dt/2 (F/m + g), L + dt/2 T)."""
+    return (v0 + half_dt * (f0 * inverse_mass + gravity_x), v1 + half_dt * (f1 * inverse_mass + gravity_y),
+            v2 + half_dt * (f2 * inverse_mass + gravity_z), l0 + half_dt * t0, l1 + half_dt * t1, l2 + half_dt * t2)
+
+
 @njit(cache=True)
 def kick_drift_bodies(count, positions, velocities, orientations, angular_momenta, forces, torques, inverse_masses,
                       principal_moments, gravity, half_dt, dt, rotations, angular_velocities, work):
@@ -274,19 +282,12 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     work_moment0, work_moment1, work_moment2 = work[7], work[8], work[9]
     for i in range(count):
         k = 3 * i
-        inverse_mass = inverse_masses[i]
-        v0 = velocity[k] + half_dt * (force[k] * inverse_mass + gravity_x)
-        v1 = velocity[k + 1] + half_dt * (force[k + 1] * inverse_mass + gravity_y)
-        v2 = velocity[k + 2] + half_dt * (force[k + 2] * inverse_mass + gravity_z)
-        velocity[k] = v0
-        velocity[k + 1] = v1
-        velocity[k + 2] = v2
-        l0 = momentum[k] + half_dt * torque[k]
-        l1 = momentum[k + 1] + half_dt * torque[k + 1]
-        l2 = momentum[k + 2] + half_dt * torque[k + 2]
-        momentum[k] = l0
-        momentum[k + 1] = l1
-        momentum[k + 2] = l2
+        v0, v1, v2, l0, l1, l2 = _half_kick(velocity[k], velocity[k + 1], velocity[k + 2], momentum[k],
+                                            momentum[k + 1], momentum[k + 2], force[k], force[k + 1], force[k + 2],
+                                            torque[k], torque[k + 1], torque[k + 2], inverse_masses[i], gravity_x,
+                                            gravity_y, gravity_z, half_dt)
+        velocity[k], velocity[k + 1], velocity[k + 2] = v0, v1, v2
+        momentum[k], momentum[k + 1], momentum[k + 2] = l0, l1, l2
         position[k] += dt * v0
         position[k + 1] += dt * v1
         position[k + 2] += dt * v2
@@ -418,19 +419,12 @@ def second_half_bodies(count, velocities, angular_momenta, forces, torques, inve
     gravity_x, gravity_y, gravity_z = gravity[0], gravity[1], gravity[2]
     for b in range(count):
         k = 3 * b
-        inverse_mass = inverse_masses[b]
-        v0 = velocity[k] + half_dt * (force[k] * inverse_mass + gravity_x)
-        v1 = velocity[k + 1] + half_dt * (force[k + 1] * inverse_mass + gravity_y)
-        v2 = velocity[k + 2] + half_dt * (force[k + 2] * inverse_mass + gravity_z)
-        velocity[k] = v0
-        velocity[k + 1] = v1
-        velocity[k + 2] = v2
-        l0 = momentum[k] + half_dt * torque[k]
-        l1 = momentum[k + 1] + half_dt * torque[k + 1]
-        l2 = momentum[k + 2] + half_dt * torque[k + 2]
-        momentum[k] = l0
-        momentum[k + 1] = l1
-        momentum[k + 2] = l2
+        v0, v1, v2, l0, l1, l2 = _half_kick(velocity[k], velocity[k + 1], velocity[k + 2], momentum[k],
+                                            momentum[k + 1], momentum[k + 2], force[k], force[k + 1], force[k + 2],
+                                            torque[k], torque[k + 1], torque[k + 2], inverse_masses[b], gravity_x,
+                                            gravity_y, gravity_z, half_dt)
+        velocity[k], velocity[k + 1], velocity[k + 2] = v0, v1, v2
+        momentum[k], momentum[k + 1], momentum[k + 2] = l0, l1, l2
         e = 9 * b
         omega0, omega1, omega2 = _spin(rotation[e], rotation[e + 1], rotation[e + 2], rotation[e + 3],
                                        rotation[e + 4], rotation[e + 5], rotation[e + 6], rotation[e + 7],
