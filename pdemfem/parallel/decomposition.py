@@ -188,7 +188,7 @@ def box_distance(points: np.ndarray, box_lower: np.ndarray, box_upper: np.ndarra
 @njit(cache=True)
 def rows_near_box(points, shift, box_lower, box_upper, cutoff):
     """The rows of the points that, moved by `shift`, lie closer than `cutoff` to the box: box_distance's
-    arithmetic (the same decisions, bit for bit) in one pass, where numpy's took six temporaries and 30 ns
+    arithmetic (the same decisions, bit for bit) in one pass, where numpy's took several temporaries and 30 ns
     per point (the ghost selection of every rebuild on every rank)."""
     count = points.shape[0]
     rows = np.empty(count, dtype=np.int64)
