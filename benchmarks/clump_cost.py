@@ -11,11 +11,12 @@ figure is the whole step's time per contact, ns.  The dumbbells' lattice is 1.6-
 spheres', so they land later: after the old default of 6000 steps (0.15 s) they were still landing (69
 list rebuilds per 1000 steps against 8, 0.64 of the spheres' contacts per member); after 16000 (0.4 s)
 both packs are at rest (no rebuild in 1000 steps).  The table gives the rebuilds of the timed steps.
-Contacts are counted alike in both scenes: Simulation.contact_count(), the touching pairs of the neighbour list plus the touching sphere-wall
-pairs, sampled every 100 steps (the two members of one dumbbell are never a listed pair, so never a
-contact).  The two are timed alternately (`--repeat` rounds, best of each) so a busy machine slows both
-alike; the CPU time of the same steps is reported beside the wall time.  Writes
-benchmarks/results/clump_cost.json (clump_cost_<separation>.json for another separation).
+Contacts are counted alike in both scenes: Simulation.contact_count(), the touching pairs of the
+neighbour list plus the touching sphere-wall pairs, sampled every 100 steps (the two members of one
+dumbbell are never a listed pair, so never a contact).  The two are timed alternately (`--repeat`
+rounds, best of each) so a busy machine slows both alike; the CPU time of the same steps is reported
+beside the wall time.  Writes benchmarks/results/clump_cost.json (clump_cost_<separation>.json for
+another separation).
 
 --phases also prints where the step's CPU time goes, per step of each scene (the pair kernel, the
 walls, the list rebuilds with the neighbour list build and the clumps' member refresh inside them, the

@@ -74,7 +74,8 @@ def scene_dict(particles: int, spacing: float = COMPACT_SPACING) -> dict:
             if wall["name"] == name:
                 wall["point"][axis] = side
     return scene
-TIMED_COLLECTIVES = ("allreduce", "Allreduce", "Iallreduce", "Allgather", "allgather", "Alltoall", "Alltoallv", "Barrier")
+TIMED_COLLECTIVES = ("allreduce", "Allreduce", "Iallreduce", "Allgather", "allgather", "Alltoall", "Alltoallv",
+                     "Barrier")
 
 
 class _CommTimer:

@@ -259,8 +259,9 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     """The step's first half over the bodies and their members: kick_bodies(dt/2) and drift_bodies(dt)
     (the same arithmetic, the same values), rotations[i] = R(q) of the new orientation, omega from L,
     and place_members for the members of each body (its members are member_rows[member_start[i]:
-    member_start[i + 1]], rows ascending; member_offsets and levers in that order).  Returns the
-    largest squared displacement of a member since the list build (inf when one is not finite).
+    member_start[i + 1]], rows ascending; member_offsets and levers in that order), whose loads in
+    row_forces and row_torques (summed onto the bodies last step) it zeroes for the next evaluation.
+    Returns the largest squared displacement of a member since the list build (inf when one is not finite).
 
     The kick and the translation go body by body, gathering q, L and the moments into the columns of
     `work` ((ROTATION_ROWS, >= count) scratch); the rotation and omega go over the columns
@@ -407,6 +408,7 @@ def sum_body_loads(count, member_start, member_rows, levers, forces, torques, bo
         body_torque[k + 1] = torque1
         body_torque[k + 2] = torque2
 
+
 @njit(cache=True)
 def second_half_bodies(count, velocities, angular_momenta, forces, torques, inverse_masses, gravity, half_dt,
                        rotations, principal_moments, angular_velocities, member_start, member_rows, levers,
@@ -440,6 +442,7 @@ def second_half_bodies(count, velocities, angular_momenta, forces, torques, inve
             row_spin[row] = omega0
             row_spin[row + 1] = omega1
             row_spin[row + 2] = omega2
+
 
 @njit(cache=True)
 def index_members(owned_count, body, offsets, body_ids, rotations, member_start, member_rows, member_offsets, levers):

@@ -32,8 +32,9 @@ def scene(folder: Path) -> dict:
                           "material": "grain", "transport_velocity": [0.5, 0.0, 0.0]})
     # A stream inserting above the pile every few steps: its insertion (collective) runs while a step's SUM
     # would otherwise still be in flight.
+    feed_box = [[0.07, 0.07, 0.052], [0.13, 0.13, 0.064]]
     data["particles"].append({"name": "feed", "material": "grain", "radius": 0.0045,
-                              "insert": {"kind": "stream", "region": {"box": [[0.07, 0.07, 0.052], [0.13, 0.13, 0.064]]},
+                              "insert": {"kind": "stream", "region": {"box": feed_box},
                                          "rate": 20000.0, "velocity": [0.0, 0.0, -1.0], "seed": 2,
                                          "interval": 10 * restart_scenes.DT}})
     return restart_scenes.add_moving_walls(data, folder)
