@@ -158,8 +158,6 @@ class Simulation:
             angular_velocities=inserted.angular_velocities[mine],
             # Heat off: no temperature is allocated, moved, checkpointed or written.
             temperatures=(group_temperature[groups] if total else np.zeros(0)) if heat else None,
-            wall_count=len(plane_walls),
-            history_width=tables.history_width,
         )
         clumps = None
         if inserted.clumps is not None:

@@ -41,7 +41,7 @@ def _kernel_results(kernels, system):
     loads = np.zeros_like(state.forces), np.zeros_like(state.torques)
     heat_flows = np.zeros_like(state.heat_flows) if system.heat else np.zeros((0, 2))
     temperatures = state.temperatures if system.heat else np.zeros(0)
-    pair_history, wall_history = neighbors.history.copy(), state.wall_history.copy()
+    pair_history, wall_history = neighbors.history.copy(), walls.candidate_history.copy()
     wall_forces, wall_heat = np.zeros_like(walls.forces), np.zeros(walls.count)
     pair_totals = kernels.pair_forces(
         neighbors.row_particles, neighbors.offsets, neighbors.partners, pair_history, state.ids, state.owned_count,

@@ -140,3 +140,82 @@ def test_history_survives_rebuild(tangential_speed):
     if tangential_speed < 0.1:
         difference = np.abs(_by_id(forgotten, "forces") - _by_id(reference, "forces")).max()
         assert difference > 1e-2 * force_scale
+
+
+def _spheres_on_walls():
+    """A sphere rocking on the floor (sticking: the tangential force is the spring, so it depends on the
+    history) and one in the floor-wall edge sliding along it slowly (two wall contacts), with spectators in
+    between so that a rebuild re-sorts the rows; gravity, tilted towards the side wall (tan = 0.2, below the
+    friction 0.3), keeps them pressed on."""
+    r = 1.0e-3
+    spectators = [((x, 6e-3, 0.5e-3 + r), r) for x in (2e-3, 6e-3, 10e-3)]
+    scene = two_spheres(radii=(r, r), materials=(GLASS, GLASS),
+                        # Hertz's resting overlaps under this gravity: 0.56 um on the floor, 0.2 um on the side.
+                        positions=[(8e-3, 3e-3, r - 5.6e-7), (r - 2e-7, 10e-3, r - 5.6e-7)],
+                        velocities=[(0.01, 0.004, 0.0), (0.0, 0.005, 0.0)], dt=2.0e-6, restitution=0.5,
+                        friction=0.3, expected_impact_speed=0.1, extra_particles=spectators,
+                        gravity=(-2.0, 0.0, -9.81))
+    scene["walls"] = [
+        {"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1], "material": "a"},
+        {"name": "side", "kind": "plane", "point": [0, 0, 0], "normal": [1, 0, 0], "material": "a"},
+    ]
+    return Simulation.from_dict(scene)
+
+
+def test_plane_wall_history_survives_rebuild():
+    """The plane walls' springs live on the list build's candidates; a forced rebuild (new candidates) must
+    hand every spring to the same (particle, wall) contact (test_wall_records_follow_their_particles: rows
+    that change)."""
+    reference, rebuilt, forgotten = (_spheres_on_walls() for _ in range(3))
+    for sim in (reference, rebuilt, forgotten):
+        sim.step(400)
+    walls = rebuilt.particle_system.walls
+    held = walls.candidate_walls[np.any(walls.candidate_history != 0.0, axis=1)]
+    assert sorted(held.tolist()) == [0, 0, 1]  # two floor springs and the side wall's
+    rebuilt.particle_system._rebuild()
+    forgotten.particle_system.walls.candidate_history[:] = 0.0
+    force_scale = np.abs(_by_id(reference, "forces")[:2]).max()
+    for _ in range(20):
+        for sim in (reference, rebuilt, forgotten):
+            sim.step(1)
+        # Each sphere sums its wall contacts in wall order whatever its row: the same bits (exact).
+        assert np.array_equal(_by_id(rebuilt, "forces"), _by_id(reference, "forces"))
+        assert np.array_equal(_by_id(rebuilt, "velocities"), _by_id(reference, "velocities"))
+    # Control: dropping the springs changes the force by far more (so the comparison above can fail).
+    difference = np.abs(_by_id(forgotten, "forces") - _by_id(reference, "forces"))[:2].max()
+    assert difference > 1e-2 * force_scale
+
+
+def test_wall_records_follow_their_particles():
+    """Records taken from one set of candidates restore each (particle id, wall) spring onto the candidates
+    built after the rows were permuted and some particles left; a record of a particle not owned here, or of a
+    contact no longer a candidate, is dropped."""
+    from pdemfem.neighbors.history import RECORD_KEYS, collect_wall_records_into, restore_wall_records
+    from pdemfem.walls.plane import _near_walls
+
+    rng = np.random.default_rng(5)
+    count, width = 300, 4
+    positions = rng.random((count, 3))
+    radii = np.full(count, 0.05)
+    ids = rng.permutation(10 * count)[:count].astype(np.int64)  # sparse ids: the binary-search look-up
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    normals = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    particles, walls = _near_walls(positions, radii, 0.05, points, normals)
+    history = rng.standard_normal((len(particles), width))
+    history[::7] = 0.0  # springs not in use: no record
+    records = np.empty((len(particles), RECORD_KEYS + width))
+    written = collect_wall_records_into(particles, walls, history, ids, records, 0)
+    assert written == len(particles) - len(particles[::7])
+    spring = {(ids[i], w): history[c] for c, (i, w) in enumerate(zip(particles, walls)) if np.any(history[c])}
+    # Permute the rows, keep 250 of them, and move every particle a little (some candidates change).
+    rows = rng.permutation(count)[:250]
+    new_positions = positions[rows] + 0.02 * rng.standard_normal((250, 3))
+    new_particles, new_walls = _near_walls(new_positions, radii[rows], 0.05, points, normals)
+    new_history = np.zeros((len(new_particles), width))
+    restore_wall_records(new_particles, new_walls, new_history, ids[rows], 250, records[:written])
+    restored = 0
+    for c, (i, w) in enumerate(zip(new_particles, new_walls)):
+        expected = spring.get((ids[rows][i], w), np.zeros(width))
+        assert np.array_equal(new_history[c], expected)
+        restored += np.any(expected != 0.0)
+    assert 0 < restored < len(spring)  # some springs moved with their particle, some were dropped

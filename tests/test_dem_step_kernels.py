@@ -202,7 +202,7 @@ def test_contact_kernels_report_the_deepest_overlap_over_the_smaller_radius():
                               zeros.copy(), np.zeros(0), np.zeros((0, 2)))
     assert deepest == pytest.approx(0.2, abs=1e-12)
     *_, deepest = plane_wall_forces(np.array([0]), np.array([0]), np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]),
-                                    np.zeros((1, 3)), np.array([1]), np.zeros((2, 1, 4)), positions, zeros.copy(),
+                                    np.zeros((1, 3)), np.array([1]), np.zeros((1, 4)), positions, zeros.copy(),
                                     zeros.copy(), radii, mass, np.ones(2), np.zeros(2, dtype=np.int32),
                                     coefficients, TANGENTIAL, 1e-7, zeros.copy(), zeros.copy(), np.zeros((1, 3)),
                                     np.zeros(0), np.zeros((0, 2)), np.zeros(1), np.zeros(1))

@@ -75,12 +75,12 @@ def test_a_checkpoint_without_state_manifest_is_refused(tmp_path):
         read_state(path, MPI.COMM_SELF)
 
 
-def particles(count: int, wall_count: int = 1) -> ParticleState:
+def particles(count: int) -> ParticleState:
     rng = np.random.default_rng(2)
     return ParticleState(ids=np.arange(count), material_index=np.zeros(count), radii=np.full(count, 0.01),
                          densities=np.ones(count), positions=rng.random((count, 3)),
                          velocities=rng.random((count, 3)), angular_velocities=rng.random((count, 3)),
-                         temperatures=np.zeros(count), wall_count=wall_count)
+                         temperatures=np.zeros(count))
 
 
 def test_field_flags_are_checked():
@@ -107,8 +107,8 @@ def test_particle_state_round_trip_registers_added_fields():
     assert fresh.registry["extra"] == state.registry["extra"]
     assert np.array_equal(fresh.fields["extra"], np.full((6, 2), 7))
     assert np.array_equal(fresh.positions, state.positions) and fresh.owned_count == 6
-    del plain["rows"]["wall_history"]
-    with pytest.raises(kinds.StateMismatch, match="wall_history"):
+    del plain["rows"]["angular_velocities"]
+    with pytest.raises(kinds.StateMismatch, match="angular_velocities"):
         particles(6).load_state_dict(plain)
 
 

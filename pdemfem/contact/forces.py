@@ -176,8 +176,8 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
 
 @njit(cache=True, fastmath=CONTRACT)
 def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_normals, wall_velocities,
-                      wall_material, wall_history, positions, velocities, angular_velocities, radii, mass,
-                      inverse_inertia, material_index, coefficients, composition, dt, forces, torques, wall_forces,
+                      wall_material, candidate_history, positions, velocities, angular_velocities, radii,
+                      mass, inverse_inertia, material_index, coefficients, composition, dt, forces, torques, wall_forces,
                       temperatures, heat_flows, wall_temperatures, wall_heat):
     """Add the forces of the candidate (particle, plane wall) pairs.
 
@@ -186,17 +186,14 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
 
     Candidates are the owned particles within reach of a wall at the last list build (every
     other pair cannot touch before the next one).  A wall is a flat rigid body (R = inf,
-    m = inf); wall_forces[w] receives the force the particles exert on wall w.  wall_history
-    is (particles, walls, history width).  Returns (elastic, dissipated, contacts, deepest overlap as a
-    fraction of the particle's radius).
+    m = inf); wall_forces[w] receives the force the particles exert on wall w.  candidate_history
+    is (candidates, history width), a row per candidate pair.  Returns (elastic, dissipated, contacts, deepest
+    overlap as a fraction of the particle's radius).
     """
     if COMPILED_COMPOSITION >= 0:
         composition = COMPILED_COMPOSITION
-    # One row per (particle, wall): slicing wall_history[i] in the loop would create (and reference-count)
-    # an array view per candidate, several times the cost of the test itself.
-    width = wall_history.shape[2]
-    wall_count = wall_history.shape[1]
-    history = wall_history.reshape(wall_history.shape[0] * wall_count, wall_history.shape[2])
+    width = candidate_history.shape[1]
+    history = candidate_history
     elastic_total = 0.0
     dissipated_total = 0.0
     contacts = 0
@@ -212,7 +209,7 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
                     + (positions[i, 1] - wall_points[w, 1]) * ny
                     + (positions[i, 2] - wall_points[w, 2]) * nz)
         overlap = radius - distance
-        row = i * wall_count + w
+        row = candidate
         active = overlap > 0.0
         if not active and composition & COHESIVE:
             active = cohesive_contact_holds(composition, coefficients, material_index[i], wall_material[w], overlap,

@@ -7,6 +7,11 @@ seen from the other particle.  Records are taken from the Verlet
 list before a rebuild, travel with their owner when it migrates, and are looked
 up again by (owner id, partner id) after the new list is built, among the few
 records of the pair's owner.  Both directions are numba loops: O(pairs) each.
+
+A particle's contact with plane wall w travels the same way, as the record (particle id,
+-1 - w, history): the partner key is negative, so no pair ever matches it, and only the
+particles near a wall hold one (a dense (particles, walls, columns) array held 160 B per
+particle for five walls, most of it zeros).
 """
 from __future__ import annotations
 
@@ -146,3 +151,58 @@ def restore_records(row_particles, offsets, partners, history, ids, owned_count,
                         value = records[k, RECORD_KEYS + column]
                         history[row, column] = signs[column] * value if flipped else value
                     break
+
+
+@njit(cache=True)
+def collect_wall_records_into(candidate_particles, candidate_walls, candidate_history, ids, records, start):
+    """Write the records (particle id, -1 - wall, history) of the plane-wall contacts with history in use into
+    `records` from row `start` on (as many as fit); returns start + how many there are."""
+    width = candidate_history.shape[1]
+    capacity = records.shape[0]
+    written = start
+    for candidate in range(candidate_particles.shape[0]):
+        if not _in_use(candidate_history, candidate):
+            continue
+        if written < capacity:
+            records[written, 0] = ids[candidate_particles[candidate]]
+            records[written, 1] = -1 - candidate_walls[candidate]
+            for column in range(width):
+                records[written, RECORD_KEYS + column] = candidate_history[candidate, column]
+        written += 1
+    return written
+
+
+@njit(cache=True)
+def restore_wall_records(candidate_particles, candidate_walls, candidate_history, ids, owned_count, records):
+    """Fill the plane-wall candidates' history from the records with a negative partner key (candidates
+    without one keep their zeros).  The candidates come in ascending particle row (pdemfem.walls.plane), so
+    a particle's are one run and each record scans only its owner's few."""
+    width = candidate_history.shape[1]
+    wall_rows = 0
+    for k in range(records.shape[0]):
+        if records[k, 1] < 0.0:
+            wall_rows += 1
+    if wall_rows == 0 or candidate_particles.shape[0] == 0:
+        return
+    wall_records = np.empty((wall_rows, records.shape[1]))
+    wall_rows = 0
+    for k in range(records.shape[0]):
+        if records[k, 1] < 0.0:
+            wall_records[wall_rows] = records[k]
+            wall_rows += 1
+    owner_rows = _owned_rows_of(wall_records, ids, owned_count)
+    starts = np.zeros(owned_count + 1, dtype=np.int64)
+    for candidate in range(candidate_particles.shape[0]):
+        starts[candidate_particles[candidate] + 1] += 1
+    for i in range(owned_count):
+        starts[i + 1] += starts[i]
+    for k in range(wall_rows):
+        row = owner_rows[k]
+        if row < 0:
+            continue
+        wall = -1 - np.int64(wall_records[k, 1])
+        for candidate in range(starts[row], starts[row + 1]):
+            if candidate_walls[candidate] == wall:
+                for column in range(width):
+                    candidate_history[candidate, column] = wall_records[k, RECORD_KEYS + column]
+                break

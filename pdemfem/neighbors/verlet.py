@@ -10,7 +10,8 @@ Tangential history lives aligned with the list.  Across a rebuild (and a
 migration between ranks) it travels as *contact records* (owner id, partner
 id, xi oriented for the owner), one per owned particle in a contact, and is
 looked up again by the two global ids, so no history is lost to a re-sort,
-a migration or a change of rank count.
+a migration or a change of rank count.  The plane walls' contacts travel in the
+same records (partner key -1 - wall, pdemfem.neighbors.history).
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from numba import njit
 
 from pdemfem import state_dict as kinds
 from pdemfem.neighbors.cells import cell_grid, cell_indices, sort_by_cell
-from pdemfem.neighbors.history import RECORD_KEYS, collect_records_into, restore_records
+from pdemfem.neighbors.history import RECORD_KEYS, collect_records_into, collect_wall_records_into, restore_records
 
 # The half stencil as runs of cells consecutive in the grid (x fastest): the own cell (later rows only) and
 # its +x neighbour; the row (dy, dz) = (+1, 0) from x-1 to x+1; the three rows dz = +1, dy = -1, 0, +1.
@@ -175,26 +176,34 @@ class VerletList:
         self._loaded_records = None
         self.builds += 1
 
-    def contact_records(self, ids: np.ndarray, owned_count: int) -> np.ndarray:
-        """History of the springs in use, one row per owned particle in contact (see module doc);
-        after load_state_dict, the loaded records until the next build."""
+    def contact_records(self, ids: np.ndarray, owned_count: int, wall_candidates=None) -> np.ndarray:
+        """History of the springs in use, one row per owned particle in contact (see module doc), followed by
+        the plane-wall contacts' records when `wall_candidates` = (particles, walls, history) is given
+        (pdemfem.walls.plane.PlaneWalls.candidates); after load_state_dict, the loaded records (walls'
+        included) until the next build."""
         if self._loaded_records is not None:
             return self._loaded_records
         # Into a buffer kept from rebuild to rebuild (its leading rows are returned: the caller uses them before
         # the next collection), for the reason the partners' buffer is kept: 1.3 ms against 1.7-2.0 ms (up to
         # 6 ms when the allocator maps the fresh array) for the settle benchmark's 110,000 records.
-        arguments = (self.row_particles, self.offsets, self.partners, self.history, ids, owned_count,
-                     self.history_signs)
-        count = collect_records_into(*arguments, self._record_buffer)
+        count = self._collect_records(ids, owned_count, wall_candidates)
         if not count <= len(self._record_buffer) <= _LARGEST_BUFFER_SLACK * count + 1024:
             self._record_buffer = np.empty((int(1.25 * count) + 1024, RECORD_KEYS + len(self.history_signs)))
-            collect_records_into(*arguments, self._record_buffer)
+            self._collect_records(ids, owned_count, wall_candidates)
         return self._record_buffer[:count]
 
+    def _collect_records(self, ids, owned_count, wall_candidates) -> int:
+        count = collect_records_into(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count,
+                                     self.history_signs, self._record_buffer)
+        if wall_candidates is not None:
+            count = collect_wall_records_into(*wall_candidates, ids, self._record_buffer, count)
+        return count
+
     # ------------------------------------------------------------ checkpoints
-    def state_dict(self, ids: np.ndarray, owned_count: int) -> dict:
-        """The contact records as CONTACT_ROWS keyed by the (owner id, partner id) pairs."""
-        records = self.contact_records(ids, owned_count)
+    def state_dict(self, ids: np.ndarray, owned_count: int, wall_candidates=None) -> dict:
+        """The contact records (the plane walls' too, with `wall_candidates`) as CONTACT_ROWS keyed by the
+        (owner id, partner id) pairs."""
+        records = self.contact_records(ids, owned_count, wall_candidates)
         return {"pairs": kinds.Entry(kinds.CONTACT_KEYS, np.ascontiguousarray(records[:, :2]).astype(np.int64)),
                 "history": kinds.Entry(kinds.CONTACT_ROWS, np.ascontiguousarray(records[:, 2:]))}
 

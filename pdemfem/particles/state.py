@@ -64,8 +64,6 @@ CORE_FIELDS = (
     _core("positions", periodic_shift=True, **_GHOST_STEP),
     _core("velocities", **_GHOST_STEP),
     _core("angular_velocities", **_GHOST_STEP),
-    # Tangential spring of each particle against each analytic wall.
-    _core("wall_history"),
     # The last step's loads: recomputed after every migration, but a checkpoint keeps them
     # (velocity Verlet's first half kick of the next step needs them).
     _core("forces", migrate=False),
@@ -85,7 +83,7 @@ class ParticleState(kinds.StateComponent):
     """Spheres: identity, material, size, kinematics, loads and contact history."""
 
     def __init__(self, ids, material_index, radii, densities, positions, velocities, angular_velocities,
-                 temperatures=None, wall_count: int = 0, history_width: int = 3):
+                 temperatures=None):
         count = len(ids)
         self.ids = np.ascontiguousarray(ids, dtype=np.int64)
         self.material_index = np.ascontiguousarray(material_index, dtype=np.int32)
@@ -97,8 +95,6 @@ class ParticleState(kinds.StateComponent):
         self.positions = np.ascontiguousarray(positions, dtype=np.float64).reshape(count, 3)
         self.velocities = np.ascontiguousarray(velocities, dtype=np.float64).reshape(count, 3)
         self.angular_velocities = np.ascontiguousarray(angular_velocities, dtype=np.float64).reshape(count, 3)
-        # Contact history (pdemfem.contact.registry.history_layout) of each particle against each plane wall.
-        self.wall_history = np.zeros((count, max(wall_count, 1), history_width))
         self.forces = np.zeros((count, 3))
         self.torques = np.zeros((count, 3))
         self.positions_at_build = self.positions.copy()

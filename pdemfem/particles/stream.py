@@ -250,9 +250,7 @@ class ParticleStreams(kinds.StateComponent):
         new = ParticleState(ids=ids, material_index=np.full(count, stream.material_index, dtype=np.int32), radii=radii,
                             densities=np.full(count, stream.density), positions=positions,
                             velocities=np.tile(stream.velocity, (count, 1)), angular_velocities=np.zeros((count, 3)),
-                            temperatures=np.full(count, stream.temperature) if state.temperatures is not None else None,
-                            wall_count=state.wall_history.shape[1],
-                            history_width=state.wall_history.shape[2])
+                            temperatures=np.full(count, stream.temperature) if state.temperatures is not None else None)
         stream.inserted += count
         stream.mass += float(np.sum(new.mass))
         return new

@@ -240,7 +240,8 @@ class ParticleSystem(kinds.StateComponent):
     def state_dict(self) -> dict:
         """Collective: the particles, their contact records, the decomposition and the running totals."""
         state = self.state
-        result = {"state": state.state_dict(), "contacts": self.neighbors.state_dict(state.ids, state.owned_count)}
+        result = {"state": state.state_dict(),
+                  "contacts": self.neighbors.state_dict(state.ids, state.owned_count, self.walls.candidates)}
         if self.decomposition is not None:
             result["decomposition"] = self.decomposition.state_dict()
         if self.clumps is not None:
@@ -296,7 +297,7 @@ class ParticleSystem(kinds.StateComponent):
         migrate: forces, torques) travel with their particles, as in canonical_rebuild: the next
         step's first half kick needs them; the new particles start with none."""
         state = self.state
-        records = self.neighbors.contact_records(state.ids, state.owned_count)  # while the ghost rows are there
+        records = self._contact_records()  # while the ghost rows are there
         state.drop_ghosts()
         state.append_particles(new_state)
         carried = [name for name in state.field_names("checkpoint") if not state.registry[name].migrate]
@@ -312,7 +313,7 @@ class ParticleSystem(kinds.StateComponent):
         state = self.state
         self._owned_loads_zeroed = False
         if records is None:
-            records = self.neighbors.contact_records(state.ids, state.owned_count)
+            records = self._contact_records()
         # Per-particle cost only matters for balancing several ranks.
         costs = self._particle_costs() if self.comm.size > 1 else np.ones(state.owned_count)
         state.drop_ghosts()
@@ -345,7 +346,8 @@ class ParticleSystem(kinds.StateComponent):
             self.ghosts.plan_and_send(state)
         self.neighbors.build(state, self.skin, records)
         self.walls.build_candidates(state.positions[:state.owned_count], state.radii[:state.owned_count],
-                                    self.skin + self.tables.cohesion_reach)
+                                    self.skin + self.tables.cohesion_reach, len(self.neighbors.history_signs))
+        self.walls.restore_history(state.ids, state.owned_count, records)
         state.positions_at_build = state.positions.copy()
         if self.clumps is not None:
             self.clumps.refresh_rows(state)
@@ -355,6 +357,10 @@ class ParticleSystem(kinds.StateComponent):
                 log.info("rebalance %d: imbalance %.3f -> %.3f", self.rebalances, self._pending_rebalance_log, after)
             self.last_imbalance = (self._pending_rebalance_log, after)
         self._pending_rebalance_log = None
+
+    def _contact_records(self) -> np.ndarray:
+        """The contact records of the particle pairs and of the plane walls (pdemfem.neighbors.history)."""
+        return self.neighbors.contact_records(self.state.ids, self.state.owned_count, self.walls.candidates)
 
     def _particle_costs(self) -> np.ndarray:
         """Cost per owned particle, in units of a listed pair that is apart (a distance test, ~5 ns):
@@ -450,7 +456,7 @@ class ParticleSystem(kinds.StateComponent):
         if walls.count:
             wall_elastic, wall_dissipated, wall_contacts, deepest_wall = self.contact_kernels.plane_wall_forces(
                 walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities,
-                walls.material_index, state.wall_history, state.positions, state.velocities,
+                walls.material_index, walls.candidate_history, state.positions, state.velocities,
                 state.angular_velocities, state.radii, state.mass, state.inverse_inertia, state.material_index,
                 tables.coefficients, tables.composition, self.dt, state.forces, state.torques, walls.forces,
                 temperatures, heat_flows, walls.temperatures, self.heat_ledger.pending)

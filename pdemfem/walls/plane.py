@@ -5,6 +5,7 @@ import numpy as np
 from numba import njit
 
 from pdemfem import state_dict as kinds
+from pdemfem.neighbors.history import restore_wall_records
 
 
 class PlaneWalls(kinds.StateComponent):
@@ -31,9 +32,12 @@ class PlaneWalls(kinds.StateComponent):
         # Fixed temperature [K] of each wall with heat on; NaN: adiabatic.
         self.temperatures = np.array([np.nan if getattr(wall, "temperature", None) is None else wall.temperature
                                       for wall in wall_configs], dtype=float).reshape(count)
-        # (particle, wall) pairs that may touch before the next list build, particle-major.
+        # (particle, wall) pairs that may touch before the next list build, particle-major, and each one's
+        # contact history (pdemfem.contact.registry.history_layout): only the particles near a wall hold a
+        # row.  Across a rebuild the history travels as contact records (pdemfem.neighbors.history).
         self.candidate_particles = np.zeros(0, dtype=np.int64)
         self.candidate_walls = np.zeros(0, dtype=np.int64)
+        self.candidate_history = np.zeros((0, 0))
         self.points_at_build = self.points.copy()
         # Work the walls have done on the particles (a moving wall feeds energy in), and their power at the
         # last force evaluation (the particle system books each step's work as the trapezoid of two powers).
@@ -54,15 +58,28 @@ class PlaneWalls(kinds.StateComponent):
             return 0.0
         return float(np.sqrt(np.max(np.sum((self.points - self.points_at_build) ** 2, axis=1))))
 
-    def build_candidates(self, positions: np.ndarray, radii: np.ndarray, skin: float) -> None:
-        """Owned particles within radius + skin of each wall (the wall side or behind it)."""
+    def build_candidates(self, positions: np.ndarray, radii: np.ndarray, skin: float, history_width: int) -> None:
+        """Owned particles within radius + skin of each wall (the wall side or behind it), with zero history
+        (restore_history fills it)."""
         self.points_at_build = self.points.copy()
         if not self.count or not len(positions):
             self.candidate_particles = np.zeros(0, dtype=np.int64)
             self.candidate_walls = np.zeros(0, dtype=np.int64)
-            return
-        self.candidate_particles, self.candidate_walls = _near_walls(positions, radii, skin, self.points,
-                                                                     self.normals)
+        else:
+            self.candidate_particles, self.candidate_walls = _near_walls(positions, radii, skin, self.points,
+                                                                         self.normals)
+        self.candidate_history = np.zeros((len(self.candidate_particles), history_width))
+
+    @property
+    def candidates(self) -> tuple:
+        """(particle rows, walls, history) of the candidate pairs: what the contact records are taken from."""
+        return self.candidate_particles, self.candidate_walls, self.candidate_history
+
+    def restore_history(self, ids: np.ndarray, owned_count: int, records: np.ndarray) -> None:
+        """The candidates' history from the contact records of the plane walls (partner key -1 - wall)."""
+        if len(records) and self.candidate_history.shape[1]:
+            restore_wall_records(self.candidate_particles, self.candidate_walls, self.candidate_history, ids,
+                                 owned_count, np.ascontiguousarray(records))
 
     # ------------------------------------------------------------ checkpoints
     _ARRAYS = ("points", "velocities", "forces")
@@ -93,7 +110,8 @@ class PlaneWalls(kinds.StateComponent):
 
 @njit(cache=True)
 def _near_walls(positions, radii, skin, points, normals):
-    """(particle, wall) pairs closer than radius + skin, particle-major (the force summation order)."""
+    """(particle, wall) pairs closer than radius + skin, particle-major in ascending row (the force summation
+    order; restore_wall_records relies on each particle's pairs being one run)."""
     wall_count = points.shape[0]
     offsets = np.empty(wall_count)
     for w in range(wall_count):

@@ -306,11 +306,11 @@ def run_slide(comm, out, drop_history, perturb=False):
         original = system_module.migrate
 
         def wrapped(comm_, state, destinations, records):
-            # Keep only the records of particles that stay: the migrated ones arrive without history.
+            # Keep only the records of particles that stay: the migrated ones arrive without history
+            # (of their pairs and of the plane walls alike).
             ids_before = state.ids[:state.owned_count].copy()
             result = original(comm_, state, destinations, records)
             stayed = ids_before[destinations == comm_.rank]
-            state.wall_history[len(stayed):state.owned_count] = 0.0  # the arrivals (appended after)
             return result[np.isin(result[:, 0].astype(np.int64), stayed)]
 
         system_module.migrate = wrapped

@@ -105,10 +105,12 @@ def gather_state(simulation) -> dict | None:
     owned = state.owned_count
     local = {"ids": state.ids[:owned], "positions": state.positions[:owned],
              "velocities": state.velocities[:owned], "angular_velocities": state.angular_velocities[:owned],
-             "forces": state.forces[:owned], "wall_history": state.wall_history[:owned]}
+             "forces": state.forces[:owned]}
     for name, values in state.fields.items():
         local["field:" + name] = values[:owned]
     gathered = comm.gather(local, root=0)
+    # The contact history of the particle pairs and the plane walls, keyed by (owner id, partner key).
+    records = comm.gather(system._contact_records().copy(), root=0)
     solids = {}
     for name, solid in simulation.solids.items():
         rows = comm.gather((np.asarray(solid.original_node_ids), solid.displacements, solid.velocities), root=0)
@@ -127,6 +129,8 @@ def gather_state(simulation) -> dict | None:
     order = np.argsort(result["ids"])
     result = {key: values[order] for key, values in result.items()}
     result.update(solids)
+    records = np.concatenate(records)
+    result["contact_records"] = records[np.lexsort((records[:, 1], records[:, 0]))]
     result["energies"] = np.array([energies[k] for k in sorted(energies)])
     result["scalars"] = np.array([simulation.step_count, system.lost_particles, simulation.time])
     if system.heat:
