@@ -211,3 +211,51 @@ def test_rows_near_box_selects_what_box_distance_selects():
             expected = np.flatnonzero(box_distance(points + shift, lower, upper) < 0.25)
             assert np.array_equal(rows_near_box(points, shift, lower, upper, 0.25), expected)
             assert 0 < len(expected) < len(points)
+
+
+class _OneRankHoldingAll:
+    """A communicator of `size` ranks of which this one holds every particle (the others none): the sums
+    over ranks are this rank's own values, so recursive_bisection runs its collective algorithm in one
+    process."""
+
+    def __init__(self, size):
+        self.size = size
+
+    def Allreduce(self, send, receive=None, op=None):
+        from mpi4py import MPI
+
+        if send is not MPI.IN_PLACE:
+            receive[...] = send
+
+
+def _ranks_of(decomposition, positions):
+    return np.bincount(decomposition.owners(positions), minlength=decomposition.rank_count)
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_a_layered_bed_is_cut_along_the_layers_and_a_uniform_column_across(ranks):
+    """160,000 particles spread at random through a 40 x 40 x 100 mm column, the lower half weighing 5 per
+    particle (contacts under load), the upper half 1 (loose grains): a horizontal cut balances the weight with
+    5x the particles on the loose side, a vertical cut balances both, so the cut runs vertically.  The same
+    column with even weights is cut horizontally (the smallest cut, fewest ghosts), as the longest-axis rule
+    did."""
+    from pdemfem.parallel.decomposition import recursive_bisection
+
+    rng = np.random.default_rng(3)
+    positions = rng.random((160_000, 3)) * [0.04, 0.04, 0.1]
+    layered = np.where(positions[:, 2] < 0.05, 5.0, 1.0)
+    lower, upper = np.full(3, -np.inf), np.full(3, np.inf)
+    share = len(positions) / ranks
+    for weights, vertical in ((layered, True), (np.ones(len(positions)), False)):
+        decomposition = recursive_bisection(_OneRankHoldingAll(ranks), positions, weights, lower, upper, 2.3e-3)
+        assert (decomposition.node_axis[0] != 2) == vertical
+        counts = _ranks_of(decomposition, positions)
+        weight = np.bincount(decomposition.owners(positions), weights=weights, minlength=ranks)
+        # Each cut is the weighted median to one particle (2^-40 of the extent apart from it); with 3 ranks the
+        # second cut splits what the first left, so a rank is off by at most two particles' weight.
+        assert np.all(np.abs(weight - weights.sum() / ranks) <= 2 * weights.max())
+        if vertical:
+            # Equal weights leave the counts apart only by how the heavy and light particles happen to fall on
+            # either side: binomial, sd sqrt(share / 4) heavy particles, each worth 4 light ones in count; 5 sd.
+            # (A horizontal cut would leave the loose side 5x the particles of the other.)
+            assert np.all(np.abs(counts - share) <= 5 * 4 * np.sqrt(share / 4))
