@@ -316,7 +316,7 @@ def test_history_counts_a_spinning_clump_as_one_rigid_body(tmp_path):
 
 
 def test_member_index_follows_the_rows_and_stands_while_they_stay(tmp_path):
-    """refresh_rows at a rebuild: the member index (each body's member rows, offsets, levers) is remade
+    """refresh_rows at a rebuild: the member index (each owned row's body, the members' levers) is remade
     when the owned rows hold other particles (here reversed), and kept as it is, without a pass over
     the members, when they hold the same ones."""
     from pdemfem.clumps.bodies import OFFSET_FIELD
@@ -330,20 +330,23 @@ def test_member_index_follows_the_rows_and_stands_while_they_stay(tmp_path):
     def check_index():
         body = state.fields[BODY_FIELD][:state.owned_count]
         rotations = rotation_matrices(clumps.orientations)
+        assert len(clumps.row_body) == state.owned_count
+        assert clumps.member_count == np.count_nonzero(body >= 0)
+        assert np.array_equal(clumps.row_body < 0, body < 0)
         for b, identity in enumerate(clumps.ids):
-            mine = clumps.member_rows[clumps.member_start[b]:clumps.member_start[b + 1]]
+            mine = np.flatnonzero(clumps.row_body == b)
             assert np.array_equal(mine, np.flatnonzero(body == identity))
-            levers = clumps.member_levers[clumps.member_start[b]:clumps.member_start[b + 1]]
+            levers = clumps.row_levers[mine]
             # R(q) offset from the same numbers; the kernel sums in another order: round-off of a lever
             assert np.abs(levers - state.fields[OFFSET_FIELD][mine] @ rotations[b].T).max() <= 4 * EPS * 3e-3
 
     check_index()
-    kept = clumps.member_rows
+    kept = clumps.row_body
     clumps.refresh_rows(state)
-    assert clumps.member_rows is kept  # the same particles in the same rows: nothing redone
+    assert clumps.row_body is kept  # the same particles in the same rows: nothing redone
     state.reorder(np.arange(state.owned_count)[::-1].copy())
     clumps.refresh_rows(state)
-    assert clumps.member_rows is not kept
+    assert clumps.row_body is not kept
     check_index()
 
 
