@@ -257,14 +257,6 @@ def free_rotation_columns(count, work):
         work[7, i] = 0.0 if small else 1.0
 
 
-@njit(inline="always", cache=True)
-def _half_kick(v0, v1, v2, l0, l1, l2, f0, f1, f2, t0, t1, t2, inverse_mass, gravity_x, gravity_y, gravity_z,
-               half_dt):
-    """kick_bodies' arithmetic on one body's numbers: (v + dt/2 (F/m + g), L + dt/2 T)."""
-    return (v0 + half_dt * (f0 * inverse_mass + gravity_x), v1 + half_dt * (f1 * inverse_mass + gravity_y),
-            v2 + half_dt * (f2 * inverse_mass + gravity_z), l0 + half_dt * t0, l1 + half_dt * t1, l2 + half_dt * t2)
-
-
 @njit(cache=True)
 def kick_drift_bodies(count, positions, velocities, orientations, angular_momenta, forces, torques, inverse_masses,
                       principal_moments, gravity, half_dt, dt, rotations, angular_velocities, work):
@@ -292,12 +284,12 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     these bodies and this dt.  Returns the largest squared displacement of a member since the list build
     (inf when one is not finite).
 
-    Three passes.  The kick and the translation go body by body, gathering q and L into the columns of
-    `work`; the rotation and omega go over the columns (free_rotation_columns, vectorised); a pass body
-    by body writes them back, the rare body beyond the polynomials' range recomputed with math.cos and
-    math.sin (_free_rotation).  Then the members are placed in row order, each reading its body's new
-    state: the rows' arrays are walked in order (a body's members are scattered over the rows), which
-    made the placement ~25 % cheaper than body by body with its members (4000 members: 29 against 39 us)."""
+    The kick and the translation go body by body, then q and L are gathered into the columns of `work`;
+    the rotation and omega go over the columns (free_rotation_columns, vectorised); a pass body by body
+    writes them back, the rare body beyond the polynomials' range recomputed with math.cos and math.sin
+    (_free_rotation).  Then the members are placed in row order, each reading its body's new state: the
+    rows' arrays are walked in order (a body's members are scattered over the rows), which made the
+    placement ~25 % cheaper than body by body with its members (4000 members: 29 against 39 us)."""
     # Flat views, components written out: the compiler then knows each row's length (2000 bodies: the kick
     # pass 9 against 12 us with two-index rows, the whole kernel 56 against 59 us; the same arithmetic).
     position, velocity, orientation = positions.reshape(-1), velocities.reshape(-1), orientations.reshape(-1)
@@ -306,20 +298,28 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     gravity_x, gravity_y, gravity_z = gravity[0], gravity[1], gravity[2]
     work_w, work_x, work_y, work_z = work[0], work[1], work[2], work[3]
     work_l0, work_l1, work_l2 = work[4], work[5], work[6]
+    # The kick and the translation apart from the gathering into columns: two simple loops instead of one
+    # (2000 bodies: 7.2 against 11.3 us; kick_bodies' arithmetic).
     for i in range(count):
         k = 3 * i
-        v0, v1, v2, l0, l1, l2 = _half_kick(velocity[k], velocity[k + 1], velocity[k + 2], momentum[k],
-                                            momentum[k + 1], momentum[k + 2], force[k], force[k + 1], force[k + 2],
-                                            torque[k], torque[k + 1], torque[k + 2], inverse_masses[i], gravity_x,
-                                            gravity_y, gravity_z, half_dt)
-        velocity[k], velocity[k + 1], velocity[k + 2] = v0, v1, v2
-        momentum[k], momentum[k + 1], momentum[k + 2] = l0, l1, l2
+        inverse_mass = inverse_masses[i]
+        v0 = velocity[k] + half_dt * (force[k] * inverse_mass + gravity_x)
+        v1 = velocity[k + 1] + half_dt * (force[k + 1] * inverse_mass + gravity_y)
+        v2 = velocity[k + 2] + half_dt * (force[k + 2] * inverse_mass + gravity_z)
+        velocity[k] = v0
+        velocity[k + 1] = v1
+        velocity[k + 2] = v2
+        momentum[k] += half_dt * torque[k]
+        momentum[k + 1] += half_dt * torque[k + 1]
+        momentum[k + 2] += half_dt * torque[k + 2]
         position[k] += dt * v0
         position[k + 1] += dt * v1
         position[k + 2] += dt * v2
-        work_l0[i] = l0
-        work_l1[i] = l1
-        work_l2[i] = l2
+    for i in range(count):
+        k = 3 * i
+        work_l0[i] = momentum[k]
+        work_l1[i] = momentum[k + 1]
+        work_l2[i] = momentum[k + 2]
         q = 4 * i
         work_w[i] = orientation[q]
         work_x[i] = orientation[q + 1]
@@ -451,18 +451,23 @@ def second_half_bodies(count, velocities, angular_momenta, forces, torques, inve
                                          torques.reshape(-1))
     rotation, moment, spin = rotations.reshape(-1), principal_moments.reshape(-1), angular_velocities.reshape(-1)
     gravity_x, gravity_y, gravity_z = gravity[0], gravity[1], gravity[2]
+    # The kick apart from omega, as in first_half_bodies (2000 bodies: 12.8 against 14.1 us).
     for b in range(count):
         k = 3 * b
-        v0, v1, v2, l0, l1, l2 = _half_kick(velocity[k], velocity[k + 1], velocity[k + 2], momentum[k],
-                                            momentum[k + 1], momentum[k + 2], force[k], force[k + 1], force[k + 2],
-                                            torque[k], torque[k + 1], torque[k + 2], inverse_masses[b], gravity_x,
-                                            gravity_y, gravity_z, half_dt)
-        velocity[k], velocity[k + 1], velocity[k + 2] = v0, v1, v2
-        momentum[k], momentum[k + 1], momentum[k + 2] = l0, l1, l2
+        inverse_mass = inverse_masses[b]
+        velocity[k] += half_dt * (force[k] * inverse_mass + gravity_x)
+        velocity[k + 1] += half_dt * (force[k + 1] * inverse_mass + gravity_y)
+        velocity[k + 2] += half_dt * (force[k + 2] * inverse_mass + gravity_z)
+        momentum[k] += half_dt * torque[k]
+        momentum[k + 1] += half_dt * torque[k + 1]
+        momentum[k + 2] += half_dt * torque[k + 2]
+    for b in range(count):
+        k = 3 * b
         e = 9 * b
         omega0, omega1, omega2 = _spin(rotation[e], rotation[e + 1], rotation[e + 2], rotation[e + 3],
                                        rotation[e + 4], rotation[e + 5], rotation[e + 6], rotation[e + 7],
-                                       rotation[e + 8], l0, l1, l2, moment[k], moment[k + 1], moment[k + 2])
+                                       rotation[e + 8], momentum[k], momentum[k + 1], momentum[k + 2], moment[k],
+                                       moment[k + 1], moment[k + 2])
         spin[k] = omega0
         spin[k + 1] = omega1
         spin[k + 2] = omega2
