@@ -15,9 +15,10 @@ from pdemfem.clumps.quaternion import quaternion_from_axis_angle, rotation_matri
 from pdemfem.clumps.rigid_body import (ROTATION_ROWS, SMALL_HALF_ANGLE, _half_angle_cosine_sine,
                                        angular_momenta_from_velocities, angular_velocities_from_momenta,
                                        body_rotations, drift_bodies, first_half_bodies, index_members,
-                                       kick_bodies, kick_bodies_and_spin, kick_drift_bodies, member_states,
-                                       move_members, place_members, rotational_energies, second_half_bodies,
-                                       sum_body_loads, sum_member_loads, sum_row_loads)
+                                       kick_bodies, kick_bodies_and_spin, kick_drift_bodies, member_levers,
+                                       member_states, move_members, place_members, rotation_constants,
+                                       rotational_energies, second_half_bodies, sum_body_loads, sum_member_loads,
+                                       sum_row_loads)
 
 EPS = np.finfo(float).eps
 NO_GRAVITY = np.zeros(3)
@@ -324,12 +325,13 @@ def test_stepped_first_half_is_the_per_body_kick_and_drift_bit_for_bit():
     assert np.isnan(orientations[11]).all() and np.isfinite(np.delete(orientations, 11, axis=0)).all()
 
 
-def test_step_kernels_body_by_body_are_the_member_kernels_bit_for_bit():
-    """The step's kernels go body by body over a member index (index_members): first_half_bodies,
-    sum_body_loads, second_half_bodies.  They give exactly the values of the member-by-member kernels
-    (kick_bodies + drift_bodies, place_members, sum_row_loads, kick_bodies_and_spin + move_members over
-    the member rows ascending): the same operations, each body's loads added in the same order.
-    Bodies of 0 to 3 members, free rows between the members, body ids not contiguous."""
+def test_step_kernels_in_row_order_are_the_member_kernels_bit_for_bit():
+    """The step's kernels reach each member row's body through an index (index_members: row_body, the
+    local body of each row) and go over the member rows in row order: first_half_bodies, sum_body_loads,
+    second_half_bodies.  They give exactly the values of the member-by-member kernels (kick_bodies +
+    drift_bodies, place_members, sum_row_loads, kick_bodies_and_spin + move_members over the member rows
+    ascending): the same operations, each body's loads added in the same order.  Bodies of 0 to 3
+    members, free rows between the members, body ids not contiguous."""
     rng = np.random.default_rng(11)
     body_ids = np.array([3, 7, 8, 20, 21], dtype=np.int64)
     sizes = [2, 1, 3, 0, 2]
@@ -349,22 +351,18 @@ def test_step_kernels_body_by_body_are_the_member_kernels_bit_for_bit():
     rotations = np.empty((count, 3, 3))
     body_rotations(count, orientations, rotations)
 
-    member_start, member_rows = np.empty(count + 1, dtype=np.int64), np.empty(rows, dtype=np.int64)
-    member_offsets, levers = np.empty((rows, 3)), np.empty((rows, 3))
-    members = index_members(rows, rows_body, offsets, body_ids, rotations, member_start, member_rows,
-                            member_offsets, levers)
-    assert members == sum(sizes) and np.array_equal(np.diff(member_start), sizes)
-    for b in range(count):
-        mine = member_rows[member_start[b]:member_start[b + 1]]
-        assert np.array_equal(mine, np.flatnonzero(rows_body == body_ids[b]))  # rows ascending
-    member_rows, member_offsets, levers = member_rows[:members], member_offsets[:members], levers[:members]
-    assert np.array_equal(member_offsets, offsets[member_rows])
+    row_body, levers = np.empty(rows, dtype=np.int64), np.full((rows, 3), 3.0)
+    members = index_members(rows, rows_body, offsets, body_ids, rotations, row_body, levers)
+    assert members == sum(sizes)
+    assert np.array_equal(row_body, np.where(rows_body >= 0, np.searchsorted(body_ids, rows_body), -1))
 
     # The reference: members in row order, their body by local index.
     reference_rows = np.flatnonzero(rows_body >= 0)
     reference_body = np.searchsorted(body_ids, rows_body[reference_rows])
     reference_offsets = np.ascontiguousarray(offsets[reference_rows])
-    mapping = np.searchsorted(reference_rows, member_rows)  # member m of the index -> its reference member
+    reference_levers = np.empty((members, 3))
+    member_levers(members, reference_body, reference_offsets, rotations, reference_levers)
+    assert np.array_equal(levers[reference_rows], reference_levers)
 
     old = {name: value.copy() for name, value in bodies.items()}
     kick_bodies(count, old["velocities"], old["momenta"], forces, torques, inverse_masses, gravity, half_dt)
@@ -380,19 +378,21 @@ def test_step_kernels_body_by_body_are_the_member_kernels_bit_for_bit():
     new_rows = [np.full((rows, 3), 5.0) for _ in range(3)]
     spins = np.empty((count, 3))
     used_loads = [np.full((rows, 3), 7.0) for _ in range(2)]
+    work = np.empty((ROTATION_ROWS, count))
+    rotation_constants(count, moments, dt, work)
     largest = first_half_bodies(count, bodies["positions"], bodies["velocities"], bodies["orientations"],
                                 bodies["momenta"], forces, torques, inverse_masses, moments, gravity, half_dt, dt,
-                                rotations, spins, np.empty((ROTATION_ROWS, count)), member_start, member_rows,
-                                member_offsets, levers, *new_rows, at_build, *used_loads)
-    member_mask = np.zeros(rows, dtype=bool)
-    member_mask[member_rows[:member_start[-1]]] = True
+                                rotations, spins, work, rows, row_body, offsets, levers, *new_rows, at_build,
+                                *used_loads)
+    member_mask = rows_body >= 0
     for loads in used_loads:  # the members' loads are zeroed for the next evaluation, the free rows' kept
         assert not loads[member_mask].any() and np.all(loads[~member_mask] == 7.0)
     assert largest == old_largest
     for name in bodies:
         assert np.array_equal(bodies[name], old[name])  # exact
     assert np.array_equal(rotations, old_rotations) and np.array_equal(spins, old_spins)
-    assert np.array_equal(levers, old_levers[mapping])
+    assert np.array_equal(levers[reference_rows], old_levers)
+    assert np.all(levers[~member_mask] == 3.0)  # a free row's lever is not written
     for new, previous in zip(new_rows, old_rows):
         assert np.array_equal(new, previous)  # free rows untouched (5.0) in both
 
@@ -400,7 +400,7 @@ def test_step_kernels_body_by_body_are_the_member_kernels_bit_for_bit():
     old_forces, old_torques = np.full((count, 3), 9.0), np.full((count, 3), 9.0)
     sum_row_loads(reference_rows, reference_body, old_levers, row_forces, row_torques, old_forces, old_torques)
     new_forces, new_torques = np.full((count, 3), 9.0), np.full((count, 3), 9.0)
-    sum_body_loads(count, member_start, member_rows, levers, row_forces, row_torques, new_forces, new_torques)
+    sum_body_loads(count, rows, row_body, levers, row_forces, row_torques, new_forces, new_torques)
     assert np.array_equal(new_forces, old_forces) and np.array_equal(new_torques, old_torques)
     assert not new_forces[sizes.index(0)].any()  # a body without members here carries no load
 
@@ -408,11 +408,34 @@ def test_step_kernels_body_by_body_are_the_member_kernels_bit_for_bit():
                          half_dt, old_rotations, moments, old_spins)
     move_members(reference_rows, reference_body, old_levers, old["velocities"], old_spins, old_rows[1], old_rows[2])
     second_half_bodies(count, bodies["velocities"], bodies["momenta"], new_forces, new_torques, inverse_masses,
-                       gravity, half_dt, rotations, moments, spins, member_start, member_rows, levers, new_rows[1],
-                       new_rows[2])
+                       gravity, half_dt, rotations, moments, spins, rows, row_body, levers, new_rows[1], new_rows[2])
     assert np.array_equal(bodies["velocities"], old["velocities"]) and np.array_equal(bodies["momenta"], old["momenta"])
     assert np.array_equal(spins, old_spins)
     assert np.array_equal(new_rows[1], old_rows[1]) and np.array_equal(new_rows[2], old_rows[2])
+
+
+def test_first_half_flags_a_non_finite_member_displacement():
+    """first_half_bodies returns inf when a member's displacement is not finite (keep_largest's rule: a
+    maximum alone would pass over NaN), here a NaN position at the list build of one member row."""
+    count, rows = 2, 3
+    row_body = np.array([1, -1, 0], dtype=np.int64)
+    moments = np.ones((count, 3))
+    work = np.empty((ROTATION_ROWS, count))
+    rotation_constants(count, moments, 1e-4, work)
+    orientations = np.tile([1.0, 0.0, 0.0, 0.0], (count, 1))
+    for at_build_value, expected in ((0.0, None), (np.nan, np.inf)):
+        at_build = np.zeros((rows, 3))
+        at_build[2, 1] = at_build_value
+        largest = first_half_bodies(count, np.ones((count, 3)), np.zeros((count, 3)), orientations.copy(),
+                                    np.zeros((count, 3)), np.zeros((count, 3)), np.zeros((count, 3)), np.ones(count),
+                                    moments, np.zeros(3), 0.5e-4, 1e-4, np.empty((count, 3, 3)), np.empty((count, 3)),
+                                    work, rows, row_body, np.zeros((rows, 3)), np.empty((rows, 3)),
+                                    *[np.zeros((rows, 3)) for _ in range(3)], at_build,
+                                    np.zeros((rows, 3)), np.zeros((rows, 3)))
+        if expected is None:
+            assert largest == 3.0  # member rows at (1, 1, 1), built at 0; the free row is not counted
+        else:
+            assert largest == expected
 
 
 def test_member_index_names_a_member_whose_body_is_not_held():
@@ -420,8 +443,9 @@ def test_member_index_names_a_member_whose_body_is_not_held():
     caller raises naming that body)."""
     body_ids = np.array([2, 5], dtype=np.int64)
     offsets, rotations = np.zeros((4, 3)), np.tile(np.eye(3), (2, 1, 1))
-    buffers = (np.empty(3, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty((4, 3)), np.empty((4, 3)))
+    buffers = (np.empty(4, dtype=np.int64), np.empty((4, 3)))
     for missing in (4, 9, 0):  # inside, above and below the held ids' span
         body = np.array([5, -1, missing, 2], dtype=np.int64)
         assert index_members(4, body, offsets, body_ids, rotations, *buffers) == -1 - 2
     assert index_members(4, np.array([5, -1, 5, 2], dtype=np.int64), offsets, body_ids, rotations, *buffers) == 3
+    assert np.array_equal(buffers[0], [1, -1, 1, 0])

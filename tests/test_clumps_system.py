@@ -316,7 +316,7 @@ def test_history_counts_a_spinning_clump_as_one_rigid_body(tmp_path):
 
 
 def test_member_index_follows_the_rows_and_stands_while_they_stay(tmp_path):
-    """refresh_rows at a rebuild: the member index (each body's member rows, offsets, levers) is remade
+    """refresh_rows at a rebuild: the member index (each owned row's body, the members' levers) is remade
     when the owned rows hold other particles (here reversed), and kept as it is, without a pass over
     the members, when they hold the same ones."""
     from pdemfem.clumps.bodies import OFFSET_FIELD
@@ -330,20 +330,23 @@ def test_member_index_follows_the_rows_and_stands_while_they_stay(tmp_path):
     def check_index():
         body = state.fields[BODY_FIELD][:state.owned_count]
         rotations = rotation_matrices(clumps.orientations)
+        assert len(clumps.row_body) == state.owned_count
+        assert clumps.member_count == np.count_nonzero(body >= 0)
+        assert np.array_equal(clumps.row_body < 0, body < 0)
         for b, identity in enumerate(clumps.ids):
-            mine = clumps.member_rows[clumps.member_start[b]:clumps.member_start[b + 1]]
+            mine = np.flatnonzero(clumps.row_body == b)
             assert np.array_equal(mine, np.flatnonzero(body == identity))
-            levers = clumps.member_levers[clumps.member_start[b]:clumps.member_start[b + 1]]
+            levers = clumps.row_levers[mine]
             # R(q) offset from the same numbers; the kernel sums in another order: round-off of a lever
             assert np.abs(levers - state.fields[OFFSET_FIELD][mine] @ rotations[b].T).max() <= 4 * EPS * 3e-3
 
     check_index()
-    kept = clumps.member_rows
+    kept = clumps.row_body
     clumps.refresh_rows(state)
-    assert clumps.member_rows is kept  # the same particles in the same rows: nothing redone
+    assert clumps.row_body is kept  # the same particles in the same rows: nothing redone
     state.reorder(np.arange(state.owned_count)[::-1].copy())
     clumps.refresh_rows(state)
-    assert clumps.member_rows is not kept
+    assert clumps.row_body is not kept
     check_index()
 
 
@@ -369,3 +372,32 @@ def test_free_spheres_beside_clumps_fall_as_spheres(tmp_path):
     assert np.allclose(particles.positions[free, 2], 0.5 - 0.5 * 9.81 * elapsed ** 2, rtol=tolerance, atol=0.0)
     # the dumbbell falls alike (its members' velocities come from the body)
     assert np.allclose(particles.velocities[~free, 2], -9.81 * elapsed, rtol=tolerance, atol=0.0)
+
+
+def test_rotation_constants_follow_the_step_and_the_bodies(tmp_path):
+    """The rotation's angle factors are kept from step to step (rotation_constants): a first half with
+    another dt, the same again, one after the bodies were re-derived with other moments, and one more
+    dt turn the bodies as kick_bodies and drift_bodies do with that dt and those moments, bit for bit."""
+    from pdemfem.clumps.rigid_body import drift_bodies, kick_bodies
+
+    sim = build(pile(tmp_path, "run"), tmp_path)
+    sim.step(20)
+    system = sim.particle_system
+    clumps, state = system.clumps, system.state
+    # spinning bodies (the pile has not touched yet): the factors decide the turn; |omega| dt ~ 1e-3
+    moments = clumps.principal_moments
+    clumps.angular_momenta[:] = np.random.default_rng(2).normal(size=(clumps.count, 3)) * moments * 40.0
+    for dt, rederive in ((0.5 * system.dt, False), (0.5 * system.dt, False), (0.5 * system.dt, True),
+                         (0.25 * system.dt, False)):
+        if rederive:  # other moments: the kept factors are stale until the bodies are re-derived, as
+            clumps.principal_moments[:] *= 1.5  # after a reorder, a removal or a checkpoint read
+            clumps._derive()
+        expected = {name: getattr(clumps, name).copy() for name in ("positions", "velocities", "orientations",
+                                                                   "angular_momenta")}
+        kick_bodies(clumps.count, expected["velocities"], expected["angular_momenta"], clumps.forces, clumps.torques,
+                    clumps.inverse_masses, system.gravity, 0.5 * dt)
+        drift_bodies(clumps.count, expected["positions"], expected["velocities"], expected["orientations"],
+                     expected["angular_momenta"], clumps.principal_moments, dt)
+        clumps.first_half(state, system.gravity, dt)
+        for name, values in expected.items():
+            assert np.array_equal(getattr(clumps, name), values), name

@@ -14,15 +14,15 @@ its inertia, which the contact laws read; the sphere integrator skips members.  
     first_half    free spheres, if any: half kick and drift (kick_drift_free_spheres, which zeroes every
                   owned row's loads, as kick_drift does); bodies and their members in one kernel
                   (first_half_bodies): half kick, drift, R(q), omega from L (the rotation vectorised over
-                  the bodies), then each body's member rows (position, velocity, spin; the lever R(q)
-                  offset kept per member; the loads zeroed)
+                  the bodies), then the member rows in row order (position, velocity, spin; the lever R(q)
+                  offset kept per row; the loads zeroed)
     (list rebuild or ghost update; every contact force on the rows)
-    sum_loads     body F, T <- the owned members' loads, body by body (sum_body_loads)
+    sum_loads     body F, T <- the owned members' loads, in row order (sum_body_loads)
     second_half   free spheres, if any: half kick; bodies: half kick and omega (with the R of the first half),
-                  then their members' velocities and spins (second_half_bodies)
+                  then their members' velocities and spins, in row order (second_half_bodies)
 
-The body kernels reach a body's members through the member index refresh_rows makes at a list
-rebuild (member_start, member_rows: the owned rows of each body, ascending), and only when the rows
+The body kernels reach a member's body through the index refresh_rows makes at a list rebuild
+(row_body: the local index of each owned row's body, -1 for a free sphere), and only when the rows
 hold other particles than at the last one.
 
 The kick formulas are those of pdemfem.particles.integrate, so a clump of one sphere follows the
@@ -46,8 +46,8 @@ from pdemfem import state_dict as kinds
 from pdemfem.clumps.quaternion import quaternion_conjugates, quaternion_products
 from pdemfem.clumps.rigid_body import (ROTATION_ROWS, angular_momenta_from_velocities,
                                        angular_velocities_from_momenta, body_rotations, first_half_bodies,
-                                       index_members, rotational_energies, second_half_bodies,
-                                       sum_body_loads)
+                                       index_members, rotation_constants, rotational_energies,
+                                       second_half_bodies, sum_body_loads)
 from pdemfem.particles.energy import particle_energy_sums
 from pdemfem.particles.integrate import keep_largest, kick_drift_row
 
@@ -131,13 +131,14 @@ class ClumpBodies(kinds.StateComponent):
         self.angular_velocities = np.zeros((self.count, 3))
         angular_velocities_from_momenta(self.count, self.orientations, self.angular_momenta, self.principal_moments,
                                         self.angular_velocities)
-        # Scratch columns of the drift's vectorised rotation (first_half_bodies), kept from step to step.
+        # Columns of the drift's vectorised rotation (first_half_bodies), kept from step to step: scratch
+        # rows, and the rows of rotation_constants, filled for the dt of the first step.
         self._rotation_work = np.empty((ROTATION_ROWS, self.count))
+        self._rotation_dt = None
         # No member index until refresh_rows (the next rebuild) makes one for these bodies.
-        self.member_start = np.zeros(self.count + 1, dtype=np.int64)
-        self.member_rows = np.zeros(0, dtype=np.int64)
-        self.member_offsets = np.zeros((0, 3))
-        self.member_levers = np.zeros((0, 3))
+        self.row_body = np.zeros(0, dtype=np.int64)
+        self.row_levers = np.zeros((0, 3))
+        self.member_count = 0
         self._indexed = None
 
     @property
@@ -214,8 +215,8 @@ class ClumpBodies(kinds.StateComponent):
         self._sort()
 
     def refresh_rows(self, state) -> None:
-        """After a rebuild (rows sorted, removed, appended): the members of each body (member_start,
-        member_rows, rows ascending within a body), their offsets and levers.  When the owned rows hold
+        """After a rebuild (rows sorted, removed, appended): the body of each owned row (row_body, local
+        index, -1 for a free sphere), the member count and the members' levers.  When the owned rows hold
         the same particles as at the last refresh and the bodies are the same (a rebuild that moved no
         row: one rank, no reorder), the index stands as it is: the levers were set by this step's
         first_half and the rows have not moved since."""
@@ -226,15 +227,13 @@ class ClumpBodies(kinds.StateComponent):
                 and np.array_equal(self._indexed[0], row_ids)):
             return
         body = state.fields[BODY_FIELD][:owned]
-        member_rows = np.empty(owned, dtype=np.int64)
-        member_offsets, levers = np.empty((owned, 3)), np.empty((owned, 3))
+        row_body = np.empty(owned, dtype=np.int64)
+        levers = np.zeros((owned, 3))  # (a free sphere's row stays 0: never read)
         # Levers R(q) offset: the load sum reads them before the next step places the members.
-        members = index_members(owned, body, state.fields[OFFSET_FIELD], self.ids, self.rotations, self.member_start,
-                                member_rows, member_offsets, levers)
+        members = index_members(owned, body, state.fields[OFFSET_FIELD], self.ids, self.rotations, row_body, levers)
         if members < 0:
             raise RuntimeError(f"the body {int(body[-1 - members])} of a clump member is not on its rank")
-        self.member_rows, self.member_offsets, self.member_levers = (member_rows[:members], member_offsets[:members],
-                                                                     levers[:members])
+        self.row_body, self.row_levers, self.member_count = row_body, levers, members
         self._indexed = (row_ids.copy(), self.ids)
 
     # ------------------------------------------------------------------ the step
@@ -243,32 +242,35 @@ class ClumpBodies(kinds.StateComponent):
         kick_drift does); members follow their bodies.  Returns the largest squared displacement of a
         row since the list build."""
         largest = 0.0
-        if len(self.member_rows) < state.owned_count:  # some owned rows are free spheres
+        if self.member_count < state.owned_count:  # some owned rows are free spheres
             largest = kick_drift_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.positions,
                                               state.velocities, state.angular_velocities, state.forces,
                                               state.torques, state.inverse_mass, state.inverse_inertia, gravity,
                                               0.5 * dt, dt, state.positions_at_build)
+        if dt != self._rotation_dt:
+            rotation_constants(self.count, self.principal_moments, dt, self._rotation_work)
+            self._rotation_dt = dt
         members = first_half_bodies(self.count, self.positions, self.velocities, self.orientations,
                                     self.angular_momenta, self.forces, self.torques, self.inverse_masses,
                                     self.principal_moments, gravity, 0.5 * dt, dt, self.rotations,
-                                    self.angular_velocities, self._rotation_work, self.member_start, self.member_rows,
-                                    self.member_offsets, self.member_levers, state.positions, state.velocities,
+                                    self.angular_velocities, self._rotation_work, len(self.row_body), self.row_body,
+                                    state.fields[OFFSET_FIELD], self.row_levers, state.positions, state.velocities,
                                     state.angular_velocities, state.positions_at_build, state.forces, state.torques)
         return max(largest, members)
 
     def sum_loads(self, state) -> None:
         """Body force and torque about the centre of mass from the owned members' contact loads."""
-        sum_body_loads(self.count, self.member_start, self.member_rows, self.member_levers, state.forces,
+        sum_body_loads(self.count, len(self.row_body), self.row_body, self.row_levers, state.forces,
                        state.torques, self.forces, self.torques)
 
     def second_half(self, state, gravity, dt) -> None:
-        if len(self.member_rows) < state.owned_count:  # some owned rows are free spheres
+        if self.member_count < state.owned_count:  # some owned rows are free spheres
             kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities,
                               state.angular_velocities, state.forces, state.torques, state.inverse_mass,
                               state.inverse_inertia, gravity, 0.5 * dt)
         second_half_bodies(self.count, self.velocities, self.angular_momenta, self.forces, self.torques,
                            self.inverse_masses, gravity, 0.5 * dt, self.rotations, self.principal_moments,
-                           self.angular_velocities, self.member_start, self.member_rows, self.member_levers,
+                           self.angular_velocities, len(self.row_body), self.row_body, self.row_levers,
                            state.velocities, state.angular_velocities)
 
     # ------------------------------------------------------------------ energies
