@@ -1,23 +1,11 @@
 """Recursive coordinate bisection (RCB) of space into one box per rank.
 
 The cut tree is built from the particles' positions weighted by their cost
-(particle, listed pairs, contacts): at each level every group of ranks splits its
-region at the coordinate that divides the group's weight in proportion to the
-ranks on each side.  The weighted median is found on all three axes at once, by
+(1 + contacts): at each level every group of ranks splits its region along the
+region's longest axis at the coordinate that divides the group's weight in
+proportion to the ranks on each side.  The weighted median is found by
 bisection on the coordinate with one small Allreduce per iteration, so no
-particle data is gathered anywhere.
-
-The axis is the one whose cut leaves the fewest particles out of place: those
-beyond the ranks' share of the particle count, plus those within the ghost reach
-of the cut (they become ghosts on the other side).  A cut that balances the
-weight can still split the particles unevenly: across a bed settling under
-gravity, a horizontal cut balances the weight with 2.5x the particles above it
-(loose grains, few contacts) as below, and the two ranks then wait for each other
-in turns (the grains' rank at every list rebuild, whose cost goes by particles; the
-bed's rank at every other step, whose cost goes by contacts).  A vertical cut gives
-both ranks the same mix.  Where the particles spread evenly (no such layering) the
-count term is zero on every axis and the ghost term picks the longest axis, whose
-cut is the smallest.  Outer faces extend to infinity (or to the
+particle data is gathered anywhere.  Outer faces extend to infinity (or to the
 periodic domain), so every point in space has exactly one owner.
 """
 from __future__ import annotations
@@ -90,12 +78,11 @@ def _owners(positions, node_axis, node_cut, node_left, node_right):
     return result
 
 
-def recursive_bisection(comm, positions, weights, lower, upper, ghost_reach: float = 0.0) -> Decomposition:
+def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition:
     """RCB of the region [lower, upper] over comm.size ranks (collective).
 
     `positions`/`weights` are this rank's particles; `lower`/`upper` bound the
-    region whose outer faces the boxes inherit (may be infinite); `ghost_reach`: how
-    far from a cut a particle is a ghost of the other side (the axis choice, module doc).
+    region whose outer faces the boxes inherit (may be infinite).
     """
     size = comm.size
     if size == 1:
@@ -125,46 +112,29 @@ def recursive_bisection(comm, positions, weights, lower, upper, ghost_reach: flo
         if not splitting:
             break
         count = len(splitting)
-        low = np.array([[regions[k][4][axis] for k in splitting] for axis in range(3)])  # (axis, slot)
-        high = np.array([[regions[k][5][axis] for k in splitting] for axis in range(3)])
+        axes = np.array([int(np.argmax(regions[k][5] - regions[k][4])) for k in splitting])
+        low = np.array([regions[k][4][axes[n]] for n, k in enumerate(splitting)])
+        high = np.array([regions[k][5][axes[n]] for n, k in enumerate(splitting)])
         fractions = np.array([(regions[k][1] // 2) / regions[k][1] for k in splitting])
         slot_of_region = -np.ones(len(regions), dtype=np.int64)
         slot_of_region[splitting] = np.arange(count)
         # Particles of regions already finished (single-rank leaves) have membership -1.
         particle_slot = np.where(membership >= 0, slot_of_region[np.maximum(membership, 0)], -1)
         active = particle_slot >= 0
-        slots = particle_slot[active]
-        active_weights = weights[active]
-        active_positions = positions[active]
+        coordinate = positions[np.arange(len(positions)), axes[np.maximum(particle_slot, 0)]]
         # astype: bincount of an empty selection returns integers, and Allreduce needs doubles everywhere.
-        totals = np.bincount(slots, weights=active_weights, minlength=count).astype(float)
+        totals = np.bincount(particle_slot[active], weights=weights[active], minlength=count).astype(float)
         comm.Allreduce(MPI.IN_PLACE, totals, op=MPI.SUM)
         cut_low, cut_high = low.copy(), high.copy()
-        left_weight = np.empty((3, count))
         for _ in range(CUT_ITERATIONS):
             cut = 0.5 * (cut_low + cut_high)
-            for axis in range(3):
-                left = active_positions[:, axis] < cut[axis, slots]
-                left_weight[axis] = np.bincount(slots[left], weights=active_weights[left], minlength=count)
+            left = active & (coordinate < cut[np.maximum(particle_slot, 0)])
+            left_weight = np.bincount(particle_slot[left], weights=weights[left], minlength=count).astype(float)
             comm.Allreduce(MPI.IN_PLACE, left_weight, op=MPI.SUM)
             too_heavy = left_weight > fractions * totals
             cut_high = np.where(too_heavy, cut, cut_high)
             cut_low = np.where(too_heavy, cut_low, cut)
-        axis_cuts = 0.5 * (cut_low + cut_high)
-        # Per axis and slot: particles left of the cut, particles within the ghost reach of it; then all.
-        counts = np.zeros((7, count))
-        for axis in range(3):
-            offset = active_positions[:, axis] - axis_cuts[axis, slots]
-            counts[axis] = np.bincount(slots[offset < 0.0], minlength=count)
-            counts[3 + axis] = np.bincount(slots[np.abs(offset) < ghost_reach], minlength=count)
-        counts[6] = np.bincount(slots, minlength=count)
-        comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
-        out_of_place = np.abs(counts[:3] - fractions * counts[6]) + counts[3:6]
-        extents = high - low
-        # The fewest particles out of place; of equals (to a particle), the longest axis.
-        axes = np.array([np.lexsort((-extents[:, n], np.round(out_of_place[:, n])))[0] for n in range(count)])
-        cuts = axis_cuts[axes, np.arange(count)]
-        coordinate = positions[np.arange(len(positions)), axes[np.maximum(particle_slot, 0)]]
+        cuts = 0.5 * (cut_low + cut_high)
         new_regions = []
         new_index_of = {}
         for n, k in enumerate(splitting):
