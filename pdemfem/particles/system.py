@@ -439,9 +439,10 @@ class ParticleSystem(kinds.StateComponent):
         # Since the step's kick_drift only the ghost rows' loads are left to zero (one pass fewer over memory).
         first = state.owned_count if self._owned_loads_zeroed else 0
         self._owned_loads_zeroed = False
-        state.forces[first:] = 0.0
-        state.torques[first:] = 0.0
-        walls.forces[:] = 0.0
+        if first < state.count:  # (on one rank there are no ghosts: no slices to make)
+            state.forces[first:] = 0.0
+            state.torques[first:] = 0.0
+        walls.forces.fill(0.0)
         owned = state.owned_count
         if self.heat:
             temperatures, heat_flows = state.temperatures, state.heat_flows
@@ -500,7 +501,8 @@ class ParticleSystem(kinds.StateComponent):
         # forces' mean; one force booked the step's work a step early: a first-order error wherever a wall's
         # force jumps, e.g. a grain on a conveyor turning from slipping to rolling).  Walls at rest: nothing.
         walls = self.walls
-        if self._booking_wall_work and walls.velocities.any():
+        # count_nonzero: numpy's any() on a 5 x 3 array costs 1.8 us, a tenth of the fixed cost of a step.
+        if self._booking_wall_work and np.count_nonzero(walls.velocities):
             power = self._plane_power()
             walls.work += 0.5 * (walls.previous_power + power) * self.dt
             walls.previous_power = power
