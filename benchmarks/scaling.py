@@ -29,6 +29,7 @@ Figures per run:
                         communication (compute), at the end
   collectives/step      the particle system's collective calls (those timed above) per timed step, rank 0,
                         rebuild steps included (a step without a rebuild makes 2: one MAX, one SUM)
+--rebalance-threshold X sets the scene's parallel.rebalance_threshold (default 1.2).
 --repeat N runs each rank count N times, the rank counts in turn, and keeps the fastest run of each (the
 machine's speed drifts by tens of per cent within minutes; the wall times of all runs are printed too).
 JSON and a PNG go to benchmarks/results/scaling.{json,png} (or --json PATH).
@@ -160,8 +161,10 @@ def worker(args) -> dict:
         tiny.step(3)
         del tiny
         build_start = time.perf_counter()
-        sim = Simulation.from_dict(scene_dict(args.particles, args.spacing), comm=comm,
-                                   output_dir=os.path.join(scratch, "out"))
+        scene = scene_dict(args.particles, args.spacing)
+        if args.rebalance_threshold is not None:
+            scene["parallel"] = {"rebalance_threshold": args.rebalance_threshold}
+        sim = Simulation.from_dict(scene, comm=comm, output_dir=os.path.join(scratch, "out"))
         build_seconds = comm.allreduce(time.perf_counter() - build_start, op=MPI.MAX)
         particles = sim.particle_count()
         sim.step(args.pre_steps)
@@ -261,6 +264,8 @@ def launch(ranks: int, particles: int, args) -> dict:
         command = [*prefix, sys.executable, str(Path(__file__).resolve()), WORKER_FLAG, part,
                    "--particles", str(particles), "--steps", str(args.steps), "--pre-steps", str(args.pre_steps),
                     "--spacing", repr(args.spacing)]
+        if args.rebalance_threshold is not None:
+            command += ["--rebalance-threshold", repr(args.rebalance_threshold)]
         subprocess.run(command, check=True, cwd=REPOSITORY)
         with open(part) as handle:
             return json.load(handle)
@@ -353,6 +358,8 @@ def parse_arguments(argv=None):
     parser.add_argument("--per-rank", type=int, default=50000, help="weak scaling: particles per rank")
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--steps", type=int, default=300, help="timed steps")
+    parser.add_argument("--rebalance-threshold", type=float, default=None,
+                        help="the scene's parallel.rebalance_threshold (default: the scene default, 1.2)")
     parser.add_argument("--repeat", type=int, default=1,
                         help="runs per rank count, taken in turn; each row is the fastest (default 1)")
     parser.add_argument("--pre-steps", type=int, default=20, help="untimed steps after the build")
