@@ -167,7 +167,16 @@ def _pyplot():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         from matplotlib import pyplot
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+        try:
+            from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+        except ImportError as error:
+            # An older system matplotlib (e.g. Debian's python3-matplotlib, which ParaView's package brings)
+            # beside the environment's own: its mpl_toolkits is a regular package and wins over the newer
+            # one's namespace package, and does not import with the newer matplotlib.
+            raise PdemfemError("matplotlib's 3-D toolkit (mpl_toolkits.mplot3d)", f"does not import: {error}",
+                               f"two matplotlib installations are mixed (this one: {matplotlib.__file__}); "
+                               "keep one: remove the system's (apt-get remove python3-matplotlib) or this "
+                               "environment's (pip uninstall matplotlib), or draw with --renderer paraview") from None
     return pyplot, Poly3DCollection
 
 

@@ -89,6 +89,10 @@ def process_environment(base: dict | None = None) -> dict:
     # One thread per rank: MPI ranks are the parallelism, BLAS threads would compete.
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         environment.setdefault(variable, "1")
+    # Where colorama is installed (many tools bring it), numba builds its error messages through it from the
+    # first kernel loaded, which registers a terminal reset ("\x1b[0m") written to stdout at every exit:
+    # a quiet run's output would not be empty, and log files would hold escape codes.
+    environment.setdefault("NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING", "1")
     # A cluster job may point numba elsewhere (jobs/README.md); otherwise a folder per source version.
     cache = kernel_cache_directory()
     if cache is not None:
