@@ -124,6 +124,18 @@ def _splitting(w, x, y, z, p0, p1, p2, factor0, factor1, factor2, polynomial):
 
 
 @njit(inline="always", cache=True)
+def _angle_factors(moment0, moment1, moment2, dt):
+    """The half angle per unit pi_k of each sub-rotation of the splitting (dt/(4 I_1), dt/(4 I_2),
+    dt/(2 I_3)), and the square of their largest (the bound of the half angles per unit |L|)."""
+    quarter = 0.25 * dt
+    factor0 = quarter / moment0
+    factor1 = quarter / moment1
+    factor2 = (0.5 * dt) / moment2
+    factor = max(factor0, factor1, factor2)
+    return factor0, factor1, factor2, factor * factor
+
+
+@njit(inline="always", cache=True)
 def _free_rotation(w, x, y, z, l0, l1, l2, moment0, moment1, moment2, dt):
     """The orientation q = (w, x, y, z) after the free rotation for dt (the splitting of the module
     docstring), renormalised.  L (world) is left unchanged: the free flow conserves it exactly.
@@ -135,12 +147,8 @@ def _free_rotation(w, x, y, z, l0, l1, l2, moment0, moment1, moment2, dt):
     p0 = r00 * l0 + r10 * l1 + r20 * l2  # pi = R(q)^T L
     p1 = r01 * l0 + r11 * l1 + r21 * l2
     p2 = r02 * l0 + r12 * l1 + r22 * l2
-    quarter = 0.25 * dt
-    factor0 = quarter / moment0
-    factor1 = quarter / moment1
-    factor2 = (0.5 * dt) / moment2
-    factor = max(factor0, factor1, factor2)
-    if factor * factor * (l0 * l0 + l1 * l1 + l2 * l2) <= SMALL_HALF_ANGLE * SMALL_HALF_ANGLE:
+    factor0, factor1, factor2, factor_squared = _angle_factors(moment0, moment1, moment2, dt)
+    if factor_squared * (l0 * l0 + l1 * l1 + l2 * l2) <= SMALL_HALF_ANGLE * SMALL_HALF_ANGLE:
         return _splitting(w, x, y, z, p0, p1, p2, factor0, factor1, factor2, True)
     # (also a non-finite L: the math functions carry its NaN on)
     return _splitting(w, x, y, z, p0, p1, p2, factor0, factor1, factor2, False)
@@ -193,24 +201,19 @@ ROTATION_ROWS = 15
 @njit(cache=True)
 def rotation_constants(count, principal_moments, dt, work):
     """Rows 8-14 of `work` (above) for the bodies' moments and the step dt: the moments, the angle
-    factors and the square of the largest, computed as _free_rotation computes them."""
-    quarter = 0.25 * dt
-    half = 0.5 * dt
+    factors and the square of the largest (_angle_factors, as _free_rotation takes them)."""
     for i in range(count):
         moment0 = principal_moments[i, 0]
         moment1 = principal_moments[i, 1]
         moment2 = principal_moments[i, 2]
-        factor0 = quarter / moment0
-        factor1 = quarter / moment1
-        factor2 = half / moment2
-        factor = max(factor0, factor1, factor2)
+        factor0, factor1, factor2, factor_squared = _angle_factors(moment0, moment1, moment2, dt)
         work[8, i] = moment0
         work[9, i] = moment1
         work[10, i] = moment2
         work[11, i] = factor0
         work[12, i] = factor1
         work[13, i] = factor2
-        work[14, i] = factor * factor
+        work[14, i] = factor_squared
 
 
 @njit(cache=True, error_model="numpy")
