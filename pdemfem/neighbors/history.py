@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from pdemfem.neighbors.cells import cell_starts_of_unsorted
+
 RECORD_KEYS = 2  # owner id, partner id; then the history columns
 
 
@@ -191,11 +193,8 @@ def restore_wall_records(candidate_particles, candidate_walls, candidate_history
             wall_records[wall_rows] = records[k]
             wall_rows += 1
     owner_rows = _owned_rows_of(wall_records, ids, owned_count)
-    starts = np.zeros(owned_count + 1, dtype=np.int64)
-    for candidate in range(candidate_particles.shape[0]):
-        starts[candidate_particles[candidate] + 1] += 1
-    for i in range(owned_count):
-        starts[i + 1] += starts[i]
+    # Where each particle row's candidates start: the counting sort's offsets, particle rows as the keys.
+    starts = cell_starts_of_unsorted(candidate_particles, owned_count)
     for k in range(wall_rows):
         row = owner_rows[k]
         if row < 0:
