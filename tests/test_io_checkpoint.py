@@ -127,6 +127,19 @@ def test_flipped_data_byte_fails_checksum(tmp_path):
     assert "checksum" in problem and "/particles/positions" in problem
 
 
+@pytest.mark.parametrize("dtype", [np.int32, np.int16, np.uint8, np.float64, np.complex128])
+def test_checksum_does_not_depend_on_the_split_of_the_rows(dtype):
+    """The ranks' checksums of their rows add up (mod 2^64) to the checksum of all rows for any split: the
+    reader's ranks split the rows otherwise than the writer's.  Exact integer arithmetic, no tolerance."""
+    from pdemfem.io.checkpoint import _sum64
+
+    values = (np.arange(3 * 751) * 2654435761 % 65521).reshape(751, 3).astype(dtype)
+    whole = _sum64(values)
+    for cuts in ([375], [1, 250, 501], [3, 7, 749]):
+        parts = np.split(values, cuts)
+        assert sum(_sum64(part) for part in parts) % 2**64 == whole, cuts
+
+
 def test_not_a_checkpoint(tmp_path):
     path = tmp_path / "other.h5"
     with h5py.File(path, "w") as handle:

@@ -4,7 +4,7 @@
     io_checkpoint.py read FILE N_PARTICLES STEP              # check this rank's share, print OK
     io_checkpoint.py loop DIR N_PARTICLES                    # write forever (for the SIGKILL test)
 
-Particle values are io_data.particle_arrays(ids, step) with unsorted, unevenly split
+Particle values are particles_for(ids, step) with unsorted, unevenly split
 ids; contacts, globals and slabs are functions of ids / rows and step too.
 """
 import json
@@ -22,6 +22,14 @@ from pdemfem.io.checkpoint import FORMAT_VERSION, checkpoint_path, read_checkpoi
 
 comm = MPI.COMM_WORLD
 SLAB_ROWS = 1001
+
+
+def particles_for(ids: np.ndarray, step: int) -> dict:
+    """io_data.particle_arrays and a 4-byte integer field, as the solver's material index: its checksum must
+    not depend on how the rows are split over the writing and the reading ranks (unevenly, odd counts)."""
+    arrays = io_data.particle_arrays(ids, step)
+    arrays["material_index"] = ((np.asarray(ids) + step) % 5).astype(np.int32)
+    return arrays
 
 
 def contacts_for(ids: np.ndarray, count: int, step: int) -> dict:
@@ -49,7 +57,7 @@ def attributes_for(step: int) -> dict:
 def write(directory: Path, count: int, step: int):
     ids = io_data.rank_particle_ids(count, comm.rank, comm.size, step)
     first, stop = SLAB_ROWS * comm.rank // comm.size, SLAB_ROWS * (comm.rank + 1) // comm.size
-    write_checkpoint(checkpoint_path(directory, step), comm, io_data.particle_arrays(ids, step),
+    write_checkpoint(checkpoint_path(directory, step), comm, particles_for(ids, step),
                      global_arrays=globals_for(step), attributes=attributes_for(step),
                      slab_arrays={"u": (slab_for(first, stop, step), first)},
                      contact_arrays=contacts_for(ids, count, step), keep=2)
@@ -70,7 +78,7 @@ elif mode == "read":
     first, stop = count * comm.rank // comm.size, count * (comm.rank + 1) // comm.size
     assert checkpoint.particle_count == count and checkpoint.particle_rows == (first, stop)
     ids = np.arange(first, stop, dtype=np.int64)
-    for name, values in io_data.particle_arrays(ids, step).items():
+    for name, values in particles_for(ids, step).items():
         assert np.array_equal(checkpoint.particles[name], values), name
     attributes = checkpoint.attributes
     for name, value in attributes_for(step).items():
