@@ -211,3 +211,23 @@ def test_rows_near_box_selects_what_box_distance_selects():
             expected = np.flatnonzero(box_distance(points + shift, lower, upper) < 0.25)
             assert np.array_equal(rows_near_box(points, shift, lower, upper, 0.25), expected)
             assert 0 < len(expected) < len(points)
+
+
+def test_bisection_left_weights_equal_numpy_masks_and_bincount_bitwise():
+    """The bisection's one-pass kernel against the numpy masks and bincount it replaced: the same weight
+    below each trial cut, bit for bit (both add in particle order), for particles of finished regions
+    (slot -1), several regions split at once and weights spanning many magnitudes (where a different
+    summation order would change the last bits)."""
+    from pdemfem.parallel.decomposition import _weights_left_of_cuts
+
+    rng = np.random.default_rng(5)
+    count = 3
+    particle_slot = rng.integers(-1, count, 20000)
+    coordinate = rng.uniform(0.0, 1.0, 20000)
+    weights = rng.uniform(0.0, 1.0, 20000) * 10.0 ** rng.integers(-8, 9, 20000)
+    for cut in (np.array([0.5, 0.1, 0.9]), np.array([0.0, 1.0, 0.37])):
+        left = (particle_slot >= 0) & (coordinate < cut[np.maximum(particle_slot, 0)])
+        expected = np.bincount(particle_slot[left], weights=weights[left], minlength=count).astype(float)
+        got = _weights_left_of_cuts(particle_slot, coordinate, cut, weights, count)
+        assert np.array_equal(got, expected)
+    assert np.all(_weights_left_of_cuts(particle_slot, coordinate, np.zeros(count), weights, count) == 0.0)

@@ -140,6 +140,21 @@ def test_ghost_update_carries_the_registered_step_fields():
     assert np.all(state.radii[first:stop] == 0.01)
 
 
+def test_ghost_update_of_a_strided_field_takes_the_per_field_path_with_the_same_rows():
+    """The update packs all fields in one kernel call when they are C-contiguous; a strided field (a view
+    into a wider array) goes field by field: the same ghost rows either way."""
+    state, ghosts, _ = periodic_ghosts()
+    first, stop = ghosts.index_map.ghost_ranges[0]
+    sources = ghosts.index_map.send_rows[0]
+    wide = np.zeros((state.count, 2))
+    wide[:, 0] = np.arange(state.count) * 0.5
+    state._set("colour", wide[:, 0])
+    assert ghosts.step_scatter._fields(state) is None
+    ghosts.update(state)
+    assert np.array_equal(state.fields["colour"][first:stop], 0.5 * sources)
+    assert np.all(wide[first:stop, 1] == 0.0)
+
+
 def test_ghost_update_allocates_no_arrays():
     state, ghosts, _ = periodic_ghosts(4000)
     ghosts.update(state)  # first call: compiles the pack/unpack kernels
@@ -169,6 +184,31 @@ def test_ghosts_appended_again_reuse_the_arrays_and_equal_a_fresh_append():
     fresh_ghosts.plan_and_send(fresh)
     for name in state.registry:
         assert np.array_equal(state.array(name), fresh.array(name)), name
+
+
+def test_remove_fills_the_holes_with_the_last_rows_and_keeps_every_field_of_each_particle():
+    """Migration removes the leaving rows by moving the last staying rows into their holes: every field of
+    every staying particle stays together (by id), the removed ones are gone, only O(removed) rows move
+    (rows before the first hole are untouched), the arrays stay views of their buffers, and a removal
+    that takes the tail (no holes) or every row works."""
+    state = particles(12)
+    state.add_field("extra", (2,), np.int32, fill=0)
+    state.fields["extra"][:] = np.arange(12)[:, None] * [1, 10]
+    positions_buffer = state.positions.base
+    before = {name: state.array(name).copy() for name in state.registry}
+    leaving = np.array([3, 7, 10, 11])
+    state.remove(leaving)
+    assert state.owned_count == state.count == 8
+    assert state.positions.base is positions_buffer
+    assert sorted(state.ids) == sorted(set(range(12)) - {3, 7, 10, 11})
+    source = [list(before["ids"]).index(particle) for particle in state.ids]
+    for name in state.registry:
+        assert np.array_equal(state.array(name), before[name][source]), name
+    assert np.array_equal(state.ids[:3], before["ids"][:3]) and np.array_equal(state.ids[4:7], before["ids"][4:7])
+    state.remove(np.array([6, 7]))  # the tail only
+    assert list(state.ids) == list(before["ids"][source][:6])
+    state.remove(np.arange(6))
+    assert state.owned_count == state.count == 0
 
 
 def _copy_of(state: ParticleState) -> ParticleState:

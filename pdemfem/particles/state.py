@@ -196,6 +196,22 @@ class ParticleState(kinds.StateComponent):
             self._set(name, values[:count])
         self.owned_count = count
 
+    def remove(self, rows: np.ndarray) -> None:
+        """Remove the given owned rows (sorted, unique), in place: the last kept rows move into the holes, so the
+        cost goes with the rows removed, not with all rows (keep's order-preserving gather copied every row of
+        every array: 0.6 ms per migration at 20,000 particles, most of the migration).  The rows' order
+        changes; the cell sort restores locality when it has broken enough (ParticleSystem._sort_owned).
+        Drops ghosts."""
+        count = self.owned_count - len(rows)
+        holes = rows[rows < count]
+        staying_tail = np.arange(count, self.owned_count)
+        staying_tail = staying_tail[~np.isin(staying_tail, rows, assume_unique=True)]
+        for name, values in self._all_arrays():
+            if len(holes):
+                values[holes] = values[staying_tail]
+            self._set(name, values[:count])
+        self.owned_count = count
+
     def drop_ghosts(self) -> None:
         # The owned rows lead every array: a slice of them is a contiguous view, no copy (the next append
         # writes into the rows after it, _append_to).
