@@ -140,21 +140,6 @@ def test_ghost_update_carries_the_registered_step_fields():
     assert np.all(state.radii[first:stop] == 0.01)
 
 
-def test_ghost_update_of_a_strided_field_takes_the_per_field_path_with_the_same_rows():
-    """The update packs all fields in one kernel call when they are C-contiguous; a strided field (a view
-    into a wider array) goes field by field: the same ghost rows either way."""
-    state, ghosts, _ = periodic_ghosts()
-    first, stop = ghosts.index_map.ghost_ranges[0]
-    sources = ghosts.index_map.send_rows[0]
-    wide = np.zeros((state.count, 2))
-    wide[:, 0] = np.arange(state.count) * 0.5
-    state._set("colour", wide[:, 0])
-    assert ghosts.step_scatter._fields(state) is None
-    ghosts.update(state)
-    assert np.array_equal(state.fields["colour"][first:stop], 0.5 * sources)
-    assert np.all(wide[first:stop, 1] == 0.0)
-
-
 def test_ghost_update_allocates_no_arrays():
     state, ghosts, _ = periodic_ghosts(4000)
     ghosts.update(state)  # first call: compiles the pack/unpack kernels

@@ -126,10 +126,6 @@ class GhostExchange:
         self.neighbours = sorted({target[0] for target in self.targets})
         self.index_map = None
         self.step_scatter = None
-        # The per-step update's persistent point-to-point requests (on the step scatter's buffers) and where
-        # each neighbour's rows arrive (periodic images of the own rank: its send buffer).
-        self._step_requests = []
-        self._step_received = {}
 
     def plan_and_send(self, state) -> None:
         """Choose the ghosts to send (at a rebuild), send them in full, append those received, and
@@ -154,83 +150,56 @@ class GhostExchange:
                 if state.registry[name].periodic_shift:
                     packed[:, start:start + columns] += send_shifts[neighbour]
             outgoing[neighbour] = packed
-        received = self._exchange(outgoing, width, _GHOST_TAG)
+        received = self._exchange(outgoing, width, _GHOST_TAG, counts=None)
         receive_counts = {}
         for neighbour in self.neighbours:
             receive_counts[neighbour] = len(received[neighbour])
             if len(received[neighbour]):
                 state.append_rows(received[neighbour], layout, as_ghosts=True)
         self.index_map = ParticleIndexMap(owned, self.neighbours, send_rows, send_shifts, receive_counts)
-        self._plan_step_scatter(state)
-
-    def _plan_step_scatter(self, state) -> None:
-        """The step scatter's buffers and persistent requests for the current index map and fields: set up
-        once per rebuild, then each step only starts and waits for them (building the requests every step
-        cost ~13 us of Python and MPI set-up against ~5 us)."""
-        self._free_step_requests()
-        scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
-        rank = self.comm.rank
-        self._step_received = {}
-        for neighbour in self.neighbours:
-            if neighbour == rank:
-                self._step_received[neighbour] = scatter.send_buffers[neighbour]
-                continue
-            self._step_received[neighbour] = scatter.receive_buffers[neighbour]
-            self._step_requests.append(self.comm.Recv_init(scatter.receive_buffers[neighbour], source=neighbour,
-                                                           tag=_GHOST_UPDATE_TAG + 1))
-        for neighbour in self.neighbours:
-            if neighbour != rank:
-                self._step_requests.append(self.comm.Send_init(scatter.send_buffers[neighbour], dest=neighbour,
-                                                               tag=_GHOST_UPDATE_TAG + 1))
-
-    def _free_step_requests(self) -> None:
-        for request in self._step_requests:
-            request.Free()
-        self._step_requests = []
-
-    def __del__(self):
-        # A decomposition replaced at a rebalance drops its exchange: MPI keeps persistent requests until freed.
-        if self._step_requests and not MPI.Is_finalized():
-            self._free_step_requests()
+        self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
 
     def update(self, state) -> None:
         """Refresh the ghosts' `ghost_step` fields (every step between rebuilds): owned rows packed into
         the preallocated send buffers, received into the preallocated receive buffers."""
         if not self.neighbours:
             return
-        if self.step_scatter.registry_version != state.registry_version:  # a field was registered since the rebuild
-            self._plan_step_scatter(state)
-        self.step_scatter.pack(state)
-        if self._step_requests:
-            MPI.Prequest.Startall(self._step_requests)
-            MPI.Request.Waitall(self._step_requests)
-        self.step_scatter.unpack(state, self._step_received)
+        scatter = self.step_scatter
+        if scatter.registry_version != state.registry_version:  # a field was registered since the rebuild
+            scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
+        scatter.pack(state)
+        received = self._exchange(scatter.send_buffers, scatter.width, _GHOST_UPDATE_TAG,
+                                  counts=self.index_map.receive_counts, receive_buffers=scatter.receive_buffers)
+        scatter.unpack(state, received)
 
-    def _exchange(self, outgoing: dict, width: int, tag: int) -> dict:
-        """Point-to-point rows to every neighbour, their counts first (on `tag`, the rows on tag + 1); the own
-        rank's rows (periodic images) are copied."""
+    def _exchange(self, outgoing: dict, width: int, tag: int, counts, receive_buffers=None) -> dict:
+        """Point-to-point rows to every neighbour; `counts` None: the counts are exchanged first.
+        receive_buffers: where to receive (preallocated); the own rank's rows (periodic images) are
+        then read from its send buffer."""
         comm, rank = self.comm, self.comm.rank
-        counts = {}
-        requests = []
-        count_buffers = {n: np.empty(1, dtype=np.int64) for n in self.neighbours}
-        for neighbour in self.neighbours:
-            if neighbour == rank:
-                continue
-            requests.append(comm.Irecv(count_buffers[neighbour], source=neighbour, tag=tag))
-        send_counts = {n: np.array([len(outgoing[n])], dtype=np.int64) for n in self.neighbours}
-        for neighbour in self.neighbours:
-            if neighbour != rank:
-                requests.append(comm.Isend(send_counts[neighbour], dest=neighbour, tag=tag))
-        MPI.Request.Waitall(requests)
-        for neighbour in self.neighbours:
-            counts[neighbour] = len(outgoing[neighbour]) if neighbour == rank else int(count_buffers[neighbour][0])
+        if counts is None:
+            counts = {}
+            requests = []
+            count_buffers = {n: np.empty(1, dtype=np.int64) for n in self.neighbours}
+            for neighbour in self.neighbours:
+                if neighbour == rank:
+                    continue
+                requests.append(comm.Irecv(count_buffers[neighbour], source=neighbour, tag=tag))
+            send_counts = {n: np.array([len(outgoing[n])], dtype=np.int64) for n in self.neighbours}
+            for neighbour in self.neighbours:
+                if neighbour != rank:
+                    requests.append(comm.Isend(send_counts[neighbour], dest=neighbour, tag=tag))
+            MPI.Request.Waitall(requests)
+            for neighbour in self.neighbours:
+                counts[neighbour] = len(outgoing[neighbour]) if neighbour == rank else int(count_buffers[neighbour][0])
         received = {}
         requests = []
         for neighbour in self.neighbours:
             if neighbour == rank:
-                received[neighbour] = outgoing[neighbour].copy()
+                received[neighbour] = outgoing[neighbour] if receive_buffers is not None else outgoing[neighbour].copy()
                 continue
-            received[neighbour] = np.empty((counts[neighbour], width))
+            received[neighbour] = (receive_buffers[neighbour] if receive_buffers is not None
+                                   else np.empty((counts[neighbour], width)))
             requests.append(comm.Irecv(received[neighbour], source=neighbour, tag=tag + 1))
         for neighbour in self.neighbours:
             if neighbour != rank:

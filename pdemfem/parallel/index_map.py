@@ -48,33 +48,17 @@ class ForwardScatter:
         self.registry_version = state.registry_version
         self.layout, self.width = state.layout(flag)
         self.shifted = [state.registry[name].periodic_shift for name, *_ in self.layout]
-        self.shifted_flags = np.array(self.shifted, dtype=np.bool_)
-        self.starts = np.array([start for _, start, *_ in self.layout], dtype=np.int64)
         self.send_buffers = {n: np.empty((len(index_map.send_rows[n]), self.width)) for n in index_map.neighbours}
         self.receive_buffers = {n: np.empty((int(index_map.receive_counts[n]), self.width))
                                 for n in index_map.neighbours}
 
-    def _fields(self, state):
-        """The fields' arrays as (count, columns) matrices, in a tuple one kernel call takes whole when they
-        are all C-contiguous (ghost_step fields are float64), else None (then one call per field)."""
-        fields = tuple(_as_matrix(state.array(name)) for name, *_ in self.layout)
-        if fields and all(values.flags.c_contiguous for values in fields):
-            return fields
-        return None
-
     def pack(self, state) -> None:
         """Copy the owned rows each neighbour receives into its send buffer (periodic shift added)."""
         index_map = self.index_map
-        fields = self._fields(state)
         for neighbour in index_map.neighbours:
             buffer = self.send_buffers[neighbour]
             rows = index_map.send_rows[neighbour]
             shifts = index_map.send_shifts[neighbour]
-            if fields is not None:
-                # One call for every field: a numba call costs microseconds of dispatch, one per field and
-                # neighbour was a third of the update (14 against ~4 us for 625 rows of three fields).
-                _pack_fields(fields, self.starts, self.shifted_flags, rows, shifts, buffer)
-                continue
             for (name, start, _, _, _), shifted in zip(self.layout, self.shifted):
                 values = _as_matrix(state.array(name))
                 if shifted:
@@ -84,13 +68,9 @@ class ForwardScatter:
 
     def unpack(self, state, buffers: dict) -> None:
         """Write each neighbour's received rows over its ghost range."""
-        fields = self._fields(state)
         for neighbour in self.index_map.neighbours:
             first, _ = self.index_map.ghost_ranges[neighbour]
             buffer = buffers[neighbour]
-            if fields is not None:
-                _unpack_fields(buffer, self.starts, fields, first)
-                continue
             for name, start, *_ in self.layout:
                 _unpack(buffer, start, _as_matrix(state.array(name)), first)
 
@@ -119,30 +99,3 @@ def _unpack(buffer, column, values, first):
     for k in range(buffer.shape[0]):
         for c in range(values.shape[1]):
             values[first + k, c] = buffer[k, column + c]
-
-
-@njit(cache=True)
-def _pack_fields(fields, starts, shifted, rows, shifts, buffer):
-    """_pack (or _pack_shifted where `shifted`) of every field of the tuple into its columns of the buffer."""
-    for f in range(len(fields)):
-        values = fields[f]
-        column = starts[f]
-        if shifted[f]:
-            for k in range(rows.shape[0]):
-                for c in range(values.shape[1]):
-                    buffer[k, column + c] = values[rows[k], c] + shifts[k, c]
-        else:
-            for k in range(rows.shape[0]):
-                for c in range(values.shape[1]):
-                    buffer[k, column + c] = values[rows[k], c]
-
-
-@njit(cache=True)
-def _unpack_fields(buffer, starts, fields, first):
-    """_unpack of every field of the tuple from its columns of the buffer."""
-    for f in range(len(fields)):
-        values = fields[f]
-        column = starts[f]
-        for k in range(buffer.shape[0]):
-            for c in range(values.shape[1]):
-                values[first + k, c] = buffer[k, column + c]
