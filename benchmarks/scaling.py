@@ -29,6 +29,10 @@ Figures per run:
                         communication (compute), at the end
   collectives/step      the particle system's collective calls (those timed above) per timed step, rank 0,
                         rebuild steps included (a step without a rebuild makes 2: one MAX, one SUM)
+  lost s run/drift/step the time lost to waiting, sum over steps of (slowest rank's work - mean), split by
+                        timescale: the whole run's imbalance, its drift over blocks of 100 steps (load
+                        moving between rebalances), and step-to-step changes with the machine's jitter
+                        (waiting_by_timescale)
 --rebalance-threshold X sets the scene's parallel.rebalance_threshold (default 1.2).
 --repeat N runs each rank count N times, the rank counts in turn, and keeps the fastest run of each (the
 machine's speed drifts by tens of per cent within minutes; the wall times of all runs are printed too).
@@ -51,6 +55,8 @@ HERE = Path(__file__).resolve().parent
 REPOSITORY = HERE.parent
 sys.path.insert(0, str(HERE))
 import settle  # noqa: E402  (the settle benchmark's materials, walls and step)
+
+import numpy as np  # noqa: E402
 
 DEFAULT_JSON = HERE / "results" / "scaling.json"
 WORKER_FLAG = "--worker-json"
@@ -148,8 +154,48 @@ def instrument(sim, timer):
         system.ghosts.comm = system.comm
 
 
+def record_step_work(system, timer, steps: int):
+    """Each step's time outside communication on this rank (wall time of ParticleSystem.step minus the timed
+    communication in it), filled in as the timed steps run."""
+    work = np.zeros(steps)
+    original_step = system.step
+    progress = {"step": 0}
+
+    def step():
+        communication_before = sum(timer.seconds.values())
+        start = time.perf_counter()
+        original_step()
+        elapsed = time.perf_counter() - start
+        index = progress["step"]
+        if index < steps:
+            work[index] = elapsed - (sum(timer.seconds.values()) - communication_before)
+        progress["step"] = index + 1
+    system.step = step
+    return work
+
+
+WAITING_BLOCK_STEPS = 100
+
+
+def waiting_by_timescale(work) -> dict:
+    """Where the ranks' waiting comes from, from each rank's work per step (ranks x steps).  Every step ends
+    in a reduction, so a step lasts as long as its slowest rank's work: the time lost to waiting is
+    sum over steps of (max - mean over ranks).  Split by timescale:
+      run    max - mean of the ranks' whole-run work: what the partition's balance itself leaves;
+      drift  the same over blocks of WAITING_BLOCK_STEPS steps, less `run`: load moving between rebalances;
+      step   the rest: step-to-step changes (rebuild steps load the ranks differently from plain steps)
+             and the machine's jitter."""
+    if work.shape[0] < 2 or work.shape[1] == 0:
+        return {"run": 0.0, "drift": 0.0, "step": 0.0}
+    per_step = float(np.sum(work.max(axis=0) - work.mean(axis=0)))
+    blocks = np.add.reduceat(work, np.arange(0, work.shape[1], WAITING_BLOCK_STEPS), axis=1)
+    per_block = float(np.sum(blocks.max(axis=0) - blocks.mean(axis=0)))
+    totals = work.sum(axis=1)
+    whole = float(totals.max() - totals.mean())
+    return {"run": whole, "drift": per_block - whole, "step": per_step - per_block}
+
+
 def worker(args) -> dict:
-    import numpy as np
     from mpi4py import MPI
 
     from pdemfem import Simulation
@@ -170,6 +216,7 @@ def worker(args) -> dict:
         sim.step(args.pre_steps)
         timer = _CommTimer()
         instrument(sim, timer)
+        step_work = record_step_work(sim.particle_system, timer, args.steps)
         comm.Barrier()
         timer.reset()
         timer.rebuild_seconds, timer.rebuilds = 0.0, 0
@@ -193,6 +240,7 @@ def worker(args) -> dict:
         rebuilds = timer.rebuilds
         rebalances = system.rebalances
     gathered = comm.gather(local, root=0)
+    work = comm.gather(step_work, root=0)
     if comm.rank != 0:
         return {}
     wall = max(item["elapsed"] for item in gathered)
@@ -217,6 +265,7 @@ def worker(args) -> dict:
         "ghosts_per_owned": float(sum(item["ghosts"] for item in gathered) / owned.sum()),
         "contacts_at_end": contacts,
         "build_seconds": build_seconds,
+        "waiting_by_timescale": waiting_by_timescale(np.array(work)),
     }
 
 
@@ -301,16 +350,19 @@ def print_table(mode: str, rows: list) -> None:
     print(f"\n{mode} scaling ({rows[0]['steps']} timed steps after {rows[0]['pre_steps']}"
           f"{f'; the fastest of {runs} runs per row' if runs > 1 else ''})")
     print(f"{'ranks':>5} {'particles':>10} {'wall s':>8} {'p-steps/s':>11} {'effic.':>7} {'comm %':>7} "
-          f"{'ghost/migr/red s':>18} {'rebuild s':>9} {'imb. N':>6} {'imb. t':>6} {'ghost/own':>9} {'coll/step':>9}")
+          f"{'ghost/migr/red s':>18} {'rebuild s':>9} {'imb. N':>6} {'imb. t':>6} {'ghost/own':>9} {'coll/step':>9} "
+          f"{'lost s run/drift/step':>22}")
     for row in rows:
         parts = row["communication_seconds_by_part_max"]
+        waiting = row.get("waiting_by_timescale", {"run": 0.0, "drift": 0.0, "step": 0.0})
         print(f"{row['ranks']:>5} {row['particles']:>10} {row['wall_seconds']:>8.2f} "
               f"{row['particle_steps_per_second']:>11.3g} {100 * row['efficiency']:>6.1f}% "
               f"{100 * row['communication_share']:>6.1f}% "
               f"{parts['ghost']:>5.2f}/{parts['migration']:>5.2f}/{parts['reductions']:>5.2f} "
               f"{row['rebuild_seconds_max']:>9.2f} {row['imbalance_particles']:>6.3f} "
               f"{row['imbalance_compute']:>6.3f} {row['ghosts_per_owned']:>9.3f} "
-              f"{row.get('collectives_per_step', 0.0):>9.2f}")
+              f"{row.get('collectives_per_step', 0.0):>9.2f} "
+              f"{waiting['run']:>6.2f}/{waiting['drift']:>6.2f}/{waiting['step']:>6.2f}")
     if runs > 1:
         for row in rows:
             seconds = ", ".join(f"{value:.2f}" for value in row["wall_seconds_of_runs"])
