@@ -414,12 +414,13 @@ def test_step_kernels_in_row_order_are_the_member_kernels_bit_for_bit():
     assert np.array_equal(new_rows[1], old_rows[1]) and np.array_equal(new_rows[2], old_rows[2])
 
 
-def test_first_half_with_the_pending_second_half_kick_is_the_two_kernels_bit_for_bit():
-    """A second half left pending (ClumpBodies.defer_second_half) is done by the next first_half_bodies
-    (pending_half_dt), in its kick pass: every array it leaves (bodies, rotations, omega, the member rows'
-    positions, velocities, spins, levers and loads) is, bit for bit, what second_half_bodies and then
-    first_half_bodies without a pending kick leave.  The pending half step differs from the new one (both
-    are used)."""
+def test_first_half_with_the_pending_load_sum_and_kick_is_the_kernels_in_turn_bit_for_bit():
+    """A load sum and second half left pending (ClumpBodies.defer_second_half) are done by the next
+    first_half_bodies (pending_half_dt): every array it leaves (bodies and their loads, rotations, omega,
+    the member rows' positions, velocities, spins, levers and zeroed loads) is, bit for bit, what
+    sum_body_loads, second_half_bodies and then first_half_bodies without a pending kick leave.  The
+    pending half step differs from the new one (both are used); the bodies' loads start as stale values
+    (the sum overwrites them)."""
     rng = np.random.default_rng(19)
     count, rows = 6, 11
     body_ids = np.arange(count, dtype=np.int64) * 2 + 1
@@ -429,8 +430,8 @@ def test_first_half_with_the_pending_second_half_kick_is_the_two_kernels_bit_for
     orientations /= np.linalg.norm(orientations, axis=1)[:, None]
     moments = rng.uniform(1.0, 3.0, size=(count, 3))
     bodies = dict(positions=rng.normal(size=(count, 3)), velocities=rng.normal(size=(count, 3)),
-                  orientations=orientations, momenta=rng.normal(size=(count, 3)))
-    forces, torques = rng.normal(size=(count, 3)), rng.normal(size=(count, 3))
+                  orientations=orientations, momenta=rng.normal(size=(count, 3)),
+                  forces=rng.normal(size=(count, 3)), torques=rng.normal(size=(count, 3)))
     inverse_masses = rng.uniform(0.5, 2.0, size=count)
     gravity, pending_half_dt, half_dt, dt = np.array([0.0, 0.0, -9.81]), 0.6e-4, 0.5e-4, 1e-4
     at_build = rng.normal(size=(rows, 3))
@@ -452,25 +453,28 @@ def test_first_half_with_the_pending_second_half_kick_is_the_two_kernels_bit_for
     def first_half(state, pending):
         body, rotation, spin, lever, motion, loads = state
         return first_half_bodies(count, body["positions"], body["velocities"], body["orientations"], body["momenta"],
-                                 forces, torques, inverse_masses, moments, gravity, pending, half_dt, dt, rotation,
-                                 spin, work.copy(), rows, row_body, offsets, lever, *motion, at_build, *loads)
+                                 body["forces"], body["torques"], inverse_masses, moments, gravity, pending, half_dt,
+                                 dt, rotation, spin, work.copy(), rows, row_body, offsets, lever, *motion, at_build,
+                                 *loads)
 
-    two_kernels = copies()
-    body, rotation, spin, lever, motion, _ = two_kernels
-    second_half_bodies(count, body["velocities"], body["momenta"], forces, torques, inverse_masses, gravity,
-                       pending_half_dt, rotation, moments, spin, rows, row_body, lever, motion[1], motion[2])
-    expected_largest = first_half(two_kernels, 0.0)
+    in_turn = copies()
+    body, rotation, spin, lever, motion, loads = in_turn
+    sum_body_loads(count, rows, row_body, lever, *loads, body["forces"], body["torques"])
+    second_half_bodies(count, body["velocities"], body["momenta"], body["forces"], body["torques"], inverse_masses,
+                       gravity, pending_half_dt, rotation, moments, spin, rows, row_body, lever, motion[1], motion[2])
+    expected_largest = first_half(in_turn, 0.0)
     merged = copies()
     assert first_half(merged, pending_half_dt) == expected_largest
     for name in bodies:
-        assert np.array_equal(merged[0][name], two_kernels[0][name]), name
+        assert np.array_equal(merged[0][name], in_turn[0][name]), name
     for got, wanted in zip(merged[1:4] + tuple(merged[4]) + tuple(merged[5]),
-                           two_kernels[1:4] + tuple(two_kernels[4]) + tuple(two_kernels[5])):
+                           in_turn[1:4] + tuple(in_turn[4]) + tuple(in_turn[5])):
         assert np.array_equal(got, wanted)
-    # the pending kick is done: without it the bodies' velocities differ
+    # the pending sum and kick are done: without them the bodies' loads and velocities differ
     without = copies()
     first_half(without, 0.0)
-    assert not np.array_equal(without[0]["velocities"], merged[0]["velocities"])
+    for name in ("forces", "velocities"):
+        assert not np.array_equal(without[0][name], merged[0][name])
 
 
 def test_first_half_flags_a_non_finite_member_displacement():

@@ -27,7 +27,8 @@ step reads the bodies' kicked velocities, their omega or their members' velociti
 next step's first_half overwrites them (it recomputes omega and places the members again; the contacts
 come after it).  So second_half only notes the bodies' kick as pending and the next first_half_bodies
 does it, just before its own half kick and on the same loads (the same roundings, bit for bit: one pass
-over the bodies instead of a kernel call of its own, and no omega or member pass).  Whoever reads the
+over the bodies instead of a kernel call of its own, and no omega or member pass).  The load sum
+(sum_loads) waits for it too: the member rows keep their loads until that kernel sums and zeroes them.  Whoever reads the
 state between steps first calls finish_second_half (ParticleSystem.finish_clump_step), which runs the
 pending second_half_bodies: Simulation.step before it returns, a stream's insertion before it changes
 the rows.  The readers of the body state (energy_sums, state_dict, a rebuild's remove_leaving) refuse
@@ -71,14 +72,12 @@ OFFSET_FIELD = "clump_offset"
 def kick_drift_free_spheres(owned_count, body, positions, velocities, angular_velocities, forces, torques,
                             inverse_mass, inverse_inertia, gravity, half_dt, dt, positions_at_build):
     """pdemfem.particles.integrate.kick_drift over the rows that are not clump members (the same arithmetic,
-    the same largest squared displacement); every owned row's loads are zeroed for the next force
-    evaluation (the members' were summed onto their bodies already)."""
+    the same largest squared displacement; their loads zeroed for the next force evaluation).  The
+    members' rows are left to first_half_bodies, which may have to sum their loads onto the bodies first
+    (a deferred load sum) and zeroes them."""
     largest = 0.0
     for i in range(owned_count):
         if body[i] >= 0:
-            for axis in range(3):
-                forces[i, axis] = 0.0
-                torques[i, axis] = 0.0
             continue
         largest = keep_largest(largest, kick_drift_row(i, positions, velocities, angular_velocities, forces, torques,
                                                        inverse_mass, inverse_inertia, gravity, half_dt, dt,
@@ -126,6 +125,7 @@ class ClumpBodies(kinds.StateComponent):
         self.defer_second_half = False
         self._pending_half_dt = 0.0  # dt/2 of the pending second half kick (0.0: none)
         self._pending_gravity = None
+        self._loads_pending = False  # this step's load sum left for the second half to defer with its kick
         self._derive()
 
     @classmethod
@@ -268,6 +268,7 @@ class ClumpBodies(kinds.StateComponent):
             self.finish_second_half(state)
             pending_half_dt = 0.0
         self._pending_half_dt = 0.0
+        self._loads_pending = False  # (first_half_bodies sums them, pending_half_dt)
         if self.member_count < state.owned_count:  # some owned rows are free spheres
             largest = kick_drift_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.positions,
                                               state.velocities, state.angular_velocities, state.forces,
@@ -285,7 +286,11 @@ class ClumpBodies(kinds.StateComponent):
         return max(largest, members)
 
     def sum_loads(self, state) -> None:
-        """Body force and torque about the centre of mass from the owned members' contact loads."""
+        """Body force and torque about the centre of mass from the owned members' contact loads; with
+        defer_second_half left pending with the second half (module docstring)."""
+        if self.defer_second_half:
+            self._loads_pending = True
+            return
         sum_body_loads(self.count, len(self.row_body), self.row_body, self.row_levers, state.forces,
                        state.torques, self.forces, self.torques)
 
@@ -296,17 +301,20 @@ class ClumpBodies(kinds.StateComponent):
             kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities,
                               state.angular_velocities, state.forces, state.torques, state.inverse_mass,
                               state.inverse_inertia, gravity, 0.5 * dt)
-        if self.defer_second_half:
+        if self._loads_pending:  # (sum_loads deferred the load sum: defer_second_half)
             self._pending_half_dt = 0.5 * dt
             self._pending_gravity = gravity
             return
         self._second_half_bodies(state, gravity, 0.5 * dt)
 
     def finish_second_half(self, state) -> None:
-        """The pending second half of the bodies, if any: their kick, omega and members' velocities and
-        spins, as second_half would have done them (the state every reader between steps expects)."""
+        """The pending load sum and second half of the bodies, if any: their loads, kick, omega and members'
+        velocities and spins, as sum_loads and second_half would have done them (the state every reader
+        between steps expects)."""
         if self._pending_half_dt:
-            half_dt, self._pending_half_dt = self._pending_half_dt, 0.0
+            half_dt, self._pending_half_dt, self._loads_pending = self._pending_half_dt, 0.0, False
+            sum_body_loads(self.count, len(self.row_body), self.row_body, self.row_levers, state.forces,
+                           state.torques, self.forces, self.torques)
             self._second_half_bodies(state, self._pending_gravity, half_dt)
 
     def _second_half_bodies(self, state, gravity, half_dt) -> None:
@@ -379,7 +387,8 @@ class ClumpBodies(kinds.StateComponent):
         # The total is counted once, on rank 0.
         self.lost = int(stored["lost"]) if self.comm is None or self.comm.rank == 0 else 0
         self.replicated = True
-        self._pending_half_dt = 0.0  # the stored bodies are kicked
+        self._pending_half_dt = 0.0  # the stored bodies' loads are summed and their state kicked
+        self._loads_pending = False
         self._sort()
 
 

@@ -287,10 +287,12 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     these bodies and this dt.  Returns the largest squared displacement of a member since the list build
     (inf when one is not finite).
 
-    pending_half_dt: the last step's second half kick, when it was left for this kernel (ClumpBodies.
-    second_half), is its dt/2; the kick then runs kick_bodies(pending_half_dt) and kick_bodies(half_dt) in
-    turn on the same forces and torques (the one evaluation between the two), each value rounded as by the
-    two kernels.  0.0: the bodies hold the kicked state (no step has a half step of 0).
+    pending_half_dt: the last step's load sum and second half kick, when they were left for this kernel
+    (ClumpBodies.sum_loads, second_half), the kick's dt/2.  The kernel then sums the member rows' loads onto
+    the bodies first (sum_body_loads, which is why the rows' loads are zeroed here and not before), and its
+    kick runs kick_bodies(pending_half_dt) and kick_bodies(half_dt) in turn on those forces and torques,
+    each value rounded as by the kernels in turn.  0.0: the bodies hold the summed loads and the kicked
+    state (no step has a half step of 0).
 
     The kick and the translation go body by body, then q and L are gathered into the columns of `work`;
     the rotation and omega go over the columns (free_rotation_columns, vectorised); a pass body by body
@@ -304,12 +306,14 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     momentum, force, torque = angular_momenta.reshape(-1), forces.reshape(-1), torques.reshape(-1)
     moment, rotation, spin = principal_moments.reshape(-1), rotations.reshape(-1), angular_velocities.reshape(-1)
     gravity_x, gravity_y, gravity_z = gravity[0], gravity[1], gravity[2]
+    pending = pending_half_dt != 0.0
+    if pending:  # the last step's load sum (its arguments are this kernel's own: no call of its own)
+        sum_body_loads(count, row_count, row_body, levers, row_forces, row_torques, forces, torques)
     work_w, work_x, work_y, work_z = work[0], work[1], work[2], work[3]
     work_l0, work_l1, work_l2 = work[4], work[5], work[6]
     # The kick and the translation apart from the gathering into columns: two simple loops instead of one
     # (2000 bodies: 7.2 against 11.3 us; kick_bodies' arithmetic).  The pending second half kick adds the
     # same accelerations once more before (one pass over the bodies instead of a kernel of its own).
-    pending = pending_half_dt != 0.0
     for i in range(count):
         k = 3 * i
         inverse_mass = inverse_masses[i]
