@@ -491,9 +491,9 @@ def test_first_half_flags_a_non_finite_member_displacement():
         at_build[2, 1] = at_build_value
         largest = first_half_bodies(count, np.ones((count, 3)), np.zeros((count, 3)), orientations.copy(),
                                     np.zeros((count, 3)), np.zeros((count, 3)), np.zeros((count, 3)), np.ones(count),
-                                    moments, np.zeros(3), 0.0, 0.5e-4, 1e-4, np.empty((count, 3, 3)), np.empty((count, 3)),
-                                    work, rows, row_body, np.zeros((rows, 3)), np.empty((rows, 3)),
-                                    *[np.zeros((rows, 3)) for _ in range(3)], at_build,
+                                    moments, np.zeros(3), 0.0, 0.5e-4, 1e-4, np.empty((count, 3, 3)),
+                                    np.empty((count, 3)), work, rows, row_body, np.zeros((rows, 3)),
+                                    np.empty((rows, 3)), *[np.zeros((rows, 3)) for _ in range(3)], at_build,
                                     np.zeros((rows, 3)), np.zeros((rows, 3)))
         if expected is None:
             assert largest == 3.0  # member rows at (1, 1, 1), built at 0; the free row is not counted

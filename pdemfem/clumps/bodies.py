@@ -22,17 +22,17 @@ its inertia, which the contact laws read; the sphere integrator skips members.  
                   then their members' velocities and spins, in row order (second_half_bodies); or, with
                   defer_second_half, the bodies' part is left pending (below)
 
-Deferred second half (defer_second_half, set by the Simulation when no solid is coupled): nothing in a
-step reads the bodies' kicked velocities, their omega or their members' velocities and spins before the
-next step's first_half overwrites them (it recomputes omega and places the members again; the contacts
-come after it).  So second_half only notes the bodies' kick as pending and the next first_half_bodies
-does it, just before its own half kick and on the same loads (the same roundings, bit for bit: one pass
-over the bodies instead of a kernel call of its own, and no omega or member pass).  The load sum
-(sum_loads) waits for it too: the member rows keep their loads until that kernel sums and zeroes them.  Whoever reads the
-state between steps first calls finish_second_half (ParticleSystem.finish_clump_step), which runs the
-pending second_half_bodies: Simulation.step before it returns, a stream's insertion before it changes
-the rows.  The readers of the body state (energy_sums, state_dict, a rebuild's remove_leaving) refuse
-a pending kick.
+Deferred load sum and second half (defer_second_half, set by the Simulation when no solid is coupled):
+nothing in a step reads the bodies' loads, their kicked velocities, their omega or their members'
+velocities and spins before the next step's first_half overwrites them (it recomputes omega and places
+the members again; the contacts come after it).  So sum_loads and second_half only note their work as
+pending, and the next first_half_bodies sums the member rows' loads (they keep them until it zeroes them)
+and does the bodies' kick just before its own half kick, on the same loads (the same roundings, bit for
+bit: one pass over the bodies instead of two kernel calls, and no omega or member pass).  Whoever reads
+the state between steps first calls finish_second_half (ParticleSystem.finish_clump_step), which runs
+the pending sum_body_loads and second_half_bodies: Simulation.step before it returns, a stream's
+insertion before it changes the rows.  The readers of the body state (energy_sums, state_dict, a
+rebuild's remove_leaving) refuse a pending kick.
 
 The body kernels reach a member's body through the index refresh_rows makes at a list rebuild
 (row_body: the local index of each owned row's body, -1 for a free sphere), and only when the rows
