@@ -90,9 +90,9 @@ class Simulation:
         # sums over the ranks of a step: without solids each step's SUM is finished at the next step's MAX.
         self.particle_system.defer_step_sum = not self.solids
         if self.particle_system.clumps is not None:
-            # Likewise the clump bodies' second half kick (and their members' velocities) waits for the next
-            # step's first half, unless the coupling reads (and its dashpot balance writes) the particles'
-            # velocities between steps.
+            # Likewise the clump bodies' load sum and second half kick (and their members' velocities) wait for
+            # the next step's first half, unless the coupling reads (and its dashpot balance writes) the
+            # particles' velocities between steps.
             self.particle_system.clumps.defer_second_half = not self.solids
         self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
         if restart is not None:

@@ -121,11 +121,12 @@ class ClumpBodies(kinds.StateComponent):
         # Every rank holds every body (after the insertion or a checkpoint read) until the next rebuild.
         self.replicated = True
         self.comm = None  # set by the particle system
-        # Leave the bodies' second half kick to the next first_half (module docstring); set by the Simulation.
+        # Leave the load sum and the bodies' second half to the next first_half (module docstring); set by the
+        # Simulation.
         self.defer_second_half = False
-        self._pending_half_dt = 0.0  # dt/2 of the pending second half kick (0.0: none)
+        self._pending_half_dt = 0.0  # dt/2 of the pending second half kick (0.0: none; its load sum pends too)
         self._pending_gravity = None
-        self._loads_pending = False  # this step's load sum left for the second half to defer with its kick
+        self._loads_pending = False  # this step's load sum left by sum_loads, for second_half to defer its kick
         self._derive()
 
     @classmethod

@@ -491,8 +491,9 @@ class ParticleSystem(kinds.StateComponent):
             self._take_step_sums(scalars[0], scalars[1], int(round(scalars[2])))
 
     def finish_clump_step(self) -> None:
-        """The clump bodies' second half, if left pending for the next step (ClumpBodies.defer_second_half):
-        their kick, omega and members' velocities and spins, for whoever reads the state between steps."""
+        """The clump bodies' load sum and second half, if left pending for the next step (ClumpBodies.
+        defer_second_half): their loads, kick, omega and members' velocities and spins, for whoever reads the
+        state between steps."""
         if self.clumps is not None:
             self.clumps.finish_second_half(self.state)
 
