@@ -22,9 +22,11 @@ another separation).
 
 --phases also prints where the step's CPU time goes, per step of each scene (the pair kernel, the
 walls, the list rebuilds with the neighbour list build and the clumps' member refresh inside them, the
-integration passes: the sphere kicks or the clumps' first half, load sum and second half; the rest is the
-step's Python and the wall/contributor bookkeeping).  The timers wrap the solver's own functions and
-cost two clock reads per call, so the figures of a --phases run are a little higher than without.
+integration passes: the sphere kicks or the clumps' first half, load sum and second half -- within
+Simulation.step the last two only note their work as pending and the next first half does it,
+docs/shapes.md; the rest is the step's Python and the wall/contributor bookkeeping).  The timers wrap
+the solver's own functions and cost two clock reads per call, so the figures of a --phases run are a
+little higher than without.
 """
 from __future__ import annotations
 

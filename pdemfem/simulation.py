@@ -89,6 +89,11 @@ class Simulation:
         # Within a call of step() only the coupling (the FE advance, its surfaces' reselection flag) reads the
         # sums over the ranks of a step: without solids each step's SUM is finished at the next step's MAX.
         self.particle_system.defer_step_sum = not self.solids
+        if self.particle_system.clumps is not None:
+            # Likewise the clump bodies' load sum and second half kick (and their members' velocities) wait for
+            # the next step's first half, unless the coupling reads (and its dashpot balance writes) the
+            # particles' velocities between steps.
+            self.particle_system.clumps.defer_second_half = not self.solids
         self.runaway_displacement = math.inf  # set by the run monitor (pdemfem.monitor) during run
         if restart is not None:
             self.io.restore(restart, force=force)
@@ -230,8 +235,10 @@ class Simulation:
             self.time = self.step_count * self.dt
             if system.largest_displacement > self.runaway_displacement:
                 break
-        # The last step's sums over the ranks, if still in flight: everything read between calls has them.
+        # The last step's sums over the ranks, if still in flight, and the clumps' second half, if pending:
+        # everything read between calls has them.
         system.finish_step_sum()
+        system.finish_clump_step()
 
     def _add_surface_forces(self) -> None:
         """The step's surface forces into their interval mean (called with the step's sums in place)."""

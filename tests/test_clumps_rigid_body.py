@@ -381,7 +381,7 @@ def test_step_kernels_in_row_order_are_the_member_kernels_bit_for_bit():
     work = np.empty((ROTATION_ROWS, count))
     rotation_constants(count, moments, dt, work)
     largest = first_half_bodies(count, bodies["positions"], bodies["velocities"], bodies["orientations"],
-                                bodies["momenta"], forces, torques, inverse_masses, moments, gravity, half_dt, dt,
+                                bodies["momenta"], forces, torques, inverse_masses, moments, gravity, 0.0, half_dt, dt,
                                 rotations, spins, work, rows, row_body, offsets, levers, *new_rows, at_build,
                                 *used_loads)
     member_mask = rows_body >= 0
@@ -414,6 +414,69 @@ def test_step_kernels_in_row_order_are_the_member_kernels_bit_for_bit():
     assert np.array_equal(new_rows[1], old_rows[1]) and np.array_equal(new_rows[2], old_rows[2])
 
 
+def test_first_half_with_the_pending_load_sum_and_kick_is_the_kernels_in_turn_bit_for_bit():
+    """A load sum and second half left pending (ClumpBodies.defer_second_half) are done by the next
+    first_half_bodies (pending_half_dt): every array it leaves (bodies and their loads, rotations, omega,
+    the member rows' positions, velocities, spins, levers and zeroed loads) is, bit for bit, what
+    sum_body_loads, second_half_bodies and then first_half_bodies without a pending kick leave.  The
+    pending half step differs from the new one (both are used); the bodies' loads start as stale values
+    (the sum overwrites them)."""
+    rng = np.random.default_rng(19)
+    count, rows = 6, 11
+    body_ids = np.arange(count, dtype=np.int64) * 2 + 1
+    rows_body = rng.choice(np.concatenate([body_ids, [-1, -1]]), size=rows)
+    offsets = rng.normal(size=(rows, 3))
+    orientations = rng.normal(size=(count, 4))
+    orientations /= np.linalg.norm(orientations, axis=1)[:, None]
+    moments = rng.uniform(1.0, 3.0, size=(count, 3))
+    bodies = dict(positions=rng.normal(size=(count, 3)), velocities=rng.normal(size=(count, 3)),
+                  orientations=orientations, momenta=rng.normal(size=(count, 3)),
+                  forces=rng.normal(size=(count, 3)), torques=rng.normal(size=(count, 3)))
+    inverse_masses = rng.uniform(0.5, 2.0, size=count)
+    gravity, pending_half_dt, half_dt, dt = np.array([0.0, 0.0, -9.81]), 0.6e-4, 0.5e-4, 1e-4
+    at_build = rng.normal(size=(rows, 3))
+    rotations = np.empty((count, 3, 3))
+    body_rotations(count, orientations, rotations)
+    row_body, levers = np.empty(rows, dtype=np.int64), np.zeros((rows, 3))
+    index_members(rows, rows_body, offsets, body_ids, rotations, row_body, levers)
+    spins = np.empty((count, 3))
+    angular_velocities_from_momenta(count, orientations, bodies["momenta"], moments, spins)
+    row_loads = [rng.normal(size=(rows, 3)) for _ in range(2)]
+    row_motion = [rng.normal(size=(rows, 3)) for _ in range(3)]  # positions, velocities, spins
+    work = np.empty((ROTATION_ROWS, count))
+    rotation_constants(count, moments, dt, work)
+
+    def copies():
+        return ({name: value.copy() for name, value in bodies.items()}, rotations.copy(), spins.copy(),
+                levers.copy(), [value.copy() for value in row_motion], [value.copy() for value in row_loads])
+
+    def first_half(state, pending):
+        body, rotation, spin, lever, motion, loads = state
+        return first_half_bodies(count, body["positions"], body["velocities"], body["orientations"], body["momenta"],
+                                 body["forces"], body["torques"], inverse_masses, moments, gravity, pending, half_dt,
+                                 dt, rotation, spin, work.copy(), rows, row_body, offsets, lever, *motion, at_build,
+                                 *loads)
+
+    in_turn = copies()
+    body, rotation, spin, lever, motion, loads = in_turn
+    sum_body_loads(count, rows, row_body, lever, *loads, body["forces"], body["torques"])
+    second_half_bodies(count, body["velocities"], body["momenta"], body["forces"], body["torques"], inverse_masses,
+                       gravity, pending_half_dt, rotation, moments, spin, rows, row_body, lever, motion[1], motion[2])
+    expected_largest = first_half(in_turn, 0.0)
+    merged = copies()
+    assert first_half(merged, pending_half_dt) == expected_largest
+    for name in bodies:
+        assert np.array_equal(merged[0][name], in_turn[0][name]), name
+    for got, wanted in zip(merged[1:4] + tuple(merged[4]) + tuple(merged[5]),
+                           in_turn[1:4] + tuple(in_turn[4]) + tuple(in_turn[5])):
+        assert np.array_equal(got, wanted)
+    # the pending sum and kick are done: without them the bodies' loads and velocities differ
+    without = copies()
+    first_half(without, 0.0)
+    for name in ("forces", "velocities"):
+        assert not np.array_equal(without[0][name], merged[0][name])
+
+
 def test_first_half_flags_a_non_finite_member_displacement():
     """first_half_bodies returns inf when a member's displacement is not finite (keep_largest's rule: a
     maximum alone would pass over NaN), here a NaN position at the list build of one member row."""
@@ -428,9 +491,9 @@ def test_first_half_flags_a_non_finite_member_displacement():
         at_build[2, 1] = at_build_value
         largest = first_half_bodies(count, np.ones((count, 3)), np.zeros((count, 3)), orientations.copy(),
                                     np.zeros((count, 3)), np.zeros((count, 3)), np.zeros((count, 3)), np.ones(count),
-                                    moments, np.zeros(3), 0.5e-4, 1e-4, np.empty((count, 3, 3)), np.empty((count, 3)),
-                                    work, rows, row_body, np.zeros((rows, 3)), np.empty((rows, 3)),
-                                    *[np.zeros((rows, 3)) for _ in range(3)], at_build,
+                                    moments, np.zeros(3), 0.0, 0.5e-4, 1e-4, np.empty((count, 3, 3)),
+                                    np.empty((count, 3)), work, rows, row_body, np.zeros((rows, 3)),
+                                    np.empty((rows, 3)), *[np.zeros((rows, 3)) for _ in range(3)], at_build,
                                     np.zeros((rows, 3)), np.zeros((rows, 3)))
         if expected is None:
             assert largest == 3.0  # member rows at (1, 1, 1), built at 0; the free row is not counted

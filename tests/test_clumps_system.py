@@ -401,3 +401,90 @@ def test_rotation_constants_follow_the_step_and_the_bodies(tmp_path):
         clumps.first_half(state, system.gravity, dt)
         for name, values in expected.items():
             assert np.array_equal(getattr(clumps, name), values), name
+
+
+# ------------------------------------------------------------------ the deferred second half
+
+def eager_and_deferred(data, tmp_path):
+    """Two simulations of `data`: one doing the clumps' second half within each step (as the particle system
+    does by itself), one leaving it to the next step's first half (the Simulation's choice without solids)."""
+    eager, deferred = build(data, tmp_path, "eager"), build(data, tmp_path, "deferred")
+    assert deferred.particle_system.clumps.defer_second_half
+    eager.particle_system.clumps.defer_second_half = False
+    return eager, deferred
+
+
+def assert_same_state(a, b):
+    for name in ("ids", "positions", "velocities", "angular_velocities", "forces"):
+        assert np.array_equal(getattr(a.particles, name), getattr(b.particles, name)), name
+    for name in ("ids", "positions", "orientations", "velocities", "angular_velocities"):
+        assert np.array_equal(getattr(a.clumps, name), getattr(b.clumps, name)), name
+    assert a.energies() == b.energies()
+
+
+def checkpoint_arrays(path):
+    arrays = {}
+    with h5py.File(path, "r") as handle:
+        handle.visititems(lambda name, item: arrays.__setitem__(name, item[()])
+                          if isinstance(item, h5py.Dataset) else None)
+    return arrays
+
+
+def test_deferred_second_half_leaves_every_reader_between_steps_the_eager_state(tmp_path):
+    """Within Simulation.step(n) the clumps' second half (bodies' kick, omega, members' velocities and spins)
+    waits for the next step's first half, which does the kick in its own pass (ClumpBodies.defer_second_half).
+    After every call, whatever its step count, the member rows (sim.particles), the bodies (sim.clumps) and
+    the energies are bit for bit those of a run doing the second half within each step; so are run's history
+    rows and checkpoints.  Ten clumps thrown onto a floor, touching it and each other from step ~300."""
+    data = pile(tmp_path, "run")
+    dt = build(data, tmp_path, "probe").dt
+    data["time"]["end"] = 600 * dt
+    data["checkpoint"] = {"every": 200 * dt, "keep": 5}
+    data["output"]["every"] = 100 * dt
+    eager, deferred = eager_and_deferred(data, tmp_path)
+    for count in (1, 2, 37, 160):  # to step 200
+        eager.step(count)
+        deferred.step(count)
+        assert_same_state(eager, deferred)
+    eager.run(progress=False)
+    deferred.run(progress=False)
+    assert deferred.step_count == 600 and deferred.contact_count() > 0
+    assert_same_state(eager, deferred)
+    assert (tmp_path / "eager" / "history.csv").read_text() == (tmp_path / "deferred" / "history.csv").read_text()
+    for step in (400, 600):
+        name = f"checkpoints/checkpoint_{step:012d}.h5"
+        a, b = checkpoint_arrays(tmp_path / "eager" / name), checkpoint_arrays(tmp_path / "deferred" / name)
+        assert a.keys() == b.keys() and any("clump" in key for key in a)
+        for key in a:
+            assert np.array_equal(a[key], b[key]), key
+
+
+def test_a_stream_inserting_beside_clumps_finds_their_second_half_done(tmp_path):
+    """A stream of spheres beside clumps inserts at the start of steps inside one Simulation.step(n) call;
+    its list rebuild (which migrates and re-indexes the members' rows, and refuses a pending kick) comes
+    after the clumps' pending second half is done: the run stays bit for bit the eager one."""
+    data = pile(tmp_path, "run")
+    dt = build(data, tmp_path, "probe").dt
+    data["particles"].append({"name": "feed", "material": "glass", "radius": 0.5 * RADIUS,
+                              "insert": {"kind": "stream", "rate": 2.0 / (40 * dt), "interval": 40 * dt,
+                                         "velocity": [0.0, 0.0, -1.0], "seed": 5,
+                                         "region": {"box": [[-4e-3, -4e-3, 1.0e-2], [4e-3, 4e-3, 1.2e-2]]}}})
+    eager, deferred = eager_and_deferred(data, tmp_path)
+    eager.step(300)
+    deferred.step(300)
+    assert deferred.streams.inserted >= 10
+    assert_same_state(eager, deferred)
+
+
+def test_readers_of_the_state_refuse_a_pending_second_half(tmp_path):
+    """The particle system's own step leaves the deferred second half pending: the energies, a checkpoint
+    and a list rebuild refuse to read the state until finish_clump_step has done it."""
+    sim = build(pile(tmp_path, "run"), tmp_path)
+    system = sim.particle_system
+    system.step()
+    for reader in (system.energies, system.clumps.state_dict, system._rebuild):
+        with pytest.raises(RuntimeError, match="pending"):
+            reader()
+    system.finish_clump_step()
+    system.energies()
+    system._rebuild()

@@ -19,7 +19,20 @@ its inertia, which the contact laws read; the sphere integrator skips members.  
     (list rebuild or ghost update; every contact force on the rows)
     sum_loads     body F, T <- the owned members' loads, in row order (sum_body_loads)
     second_half   free spheres, if any: half kick; bodies: half kick and omega (with the R of the first half),
-                  then their members' velocities and spins, in row order (second_half_bodies)
+                  then their members' velocities and spins, in row order (second_half_bodies); or, with
+                  defer_second_half, the bodies' part is left pending (below)
+
+Deferred load sum and second half (defer_second_half, set by the Simulation when no solid is coupled):
+nothing in a step reads the bodies' loads, their kicked velocities, their omega or their members'
+velocities and spins before the next step's first_half overwrites them (it recomputes omega and places
+the members again; the contacts come after it).  So sum_loads and second_half only note their work as
+pending, and the next first_half_bodies sums the member rows' loads (they keep them until it zeroes them)
+and does the bodies' kick just before its own half kick, on the same loads (the same roundings, bit for
+bit: one pass over the bodies instead of two kernel calls, and no omega or member pass).  Whoever reads
+the state between steps first calls finish_second_half (ParticleSystem.finish_clump_step), which runs
+the pending sum_body_loads and second_half_bodies: Simulation.step before it returns, a stream's
+insertion before it changes the rows.  The readers of the body state (energy_sums, state_dict, a
+rebuild's remove_leaving) refuse a pending kick.
 
 The body kernels reach a member's body through the index refresh_rows makes at a list rebuild
 (row_body: the local index of each owned row's body, -1 for a free sphere), and only when the rows
@@ -59,14 +72,12 @@ OFFSET_FIELD = "clump_offset"
 def kick_drift_free_spheres(owned_count, body, positions, velocities, angular_velocities, forces, torques,
                             inverse_mass, inverse_inertia, gravity, half_dt, dt, positions_at_build):
     """pdemfem.particles.integrate.kick_drift over the rows that are not clump members (the same arithmetic,
-    the same largest squared displacement); every owned row's loads are zeroed for the next force
-    evaluation (the members' were summed onto their bodies already)."""
+    the same largest squared displacement; their loads zeroed for the next force evaluation).  The
+    members' rows are left to first_half_bodies, which may have to sum their loads onto the bodies first
+    (a deferred load sum) and zeroes them."""
     largest = 0.0
     for i in range(owned_count):
         if body[i] >= 0:
-            for axis in range(3):
-                forces[i, axis] = 0.0
-                torques[i, axis] = 0.0
             continue
         largest = keep_largest(largest, kick_drift_row(i, positions, velocities, angular_velocities, forces, torques,
                                                        inverse_mass, inverse_inertia, gravity, half_dt, dt,
@@ -110,6 +121,12 @@ class ClumpBodies(kinds.StateComponent):
         # Every rank holds every body (after the insertion or a checkpoint read) until the next rebuild.
         self.replicated = True
         self.comm = None  # set by the particle system
+        # Leave the load sum and the bodies' second half to the next first_half (module docstring); set by the
+        # Simulation.
+        self.defer_second_half = False
+        self._pending_half_dt = 0.0  # dt/2 of the pending second half kick (0.0: none; its load sum pends too)
+        self._pending_gravity = None
+        self._loads_pending = False  # this step's load sum left by sum_loads, for second_half to defer its kick
         self._derive()
 
     @classmethod
@@ -171,6 +188,11 @@ class ClumpBodies(kinds.StateComponent):
         offsets = state.fields[OFFSET_FIELD][:state.owned_count]
         local = float(np.sqrt((offsets ** 2).sum(axis=1).max())) if len(offsets) else 0.0
         return comm.allreduce(local, op=MPI.MAX) if comm.size > 1 else local
+
+    def _refuse_pending_kick(self, reader: str) -> None:
+        if self._pending_half_dt:
+            raise RuntimeError(f"clumps: {reader} with the second half kick pending (call "
+                               f"ParticleSystem.finish_clump_step first)")
 
     def member_destinations(self, state, destinations, decomposition) -> np.ndarray:
         """Rank of every owned row at a rebuild: a member goes to its body's owner."""
@@ -242,6 +264,12 @@ class ClumpBodies(kinds.StateComponent):
         kick_drift does); members follow their bodies.  Returns the largest squared displacement of a
         row since the list build."""
         largest = 0.0
+        pending_half_dt = self._pending_half_dt
+        if pending_half_dt and gravity is not self._pending_gravity:  # (the system's gravity: never so)
+            self.finish_second_half(state)
+            pending_half_dt = 0.0
+        self._pending_half_dt = 0.0
+        self._loads_pending = False  # (first_half_bodies sums them, pending_half_dt)
         if self.member_count < state.owned_count:  # some owned rows are free spheres
             largest = kick_drift_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.positions,
                                               state.velocities, state.angular_velocities, state.forces,
@@ -252,30 +280,54 @@ class ClumpBodies(kinds.StateComponent):
             self._rotation_dt = dt
         members = first_half_bodies(self.count, self.positions, self.velocities, self.orientations,
                                     self.angular_momenta, self.forces, self.torques, self.inverse_masses,
-                                    self.principal_moments, gravity, 0.5 * dt, dt, self.rotations,
+                                    self.principal_moments, gravity, pending_half_dt, 0.5 * dt, dt, self.rotations,
                                     self.angular_velocities, self._rotation_work, len(self.row_body), self.row_body,
                                     state.fields[OFFSET_FIELD], self.row_levers, state.positions, state.velocities,
                                     state.angular_velocities, state.positions_at_build, state.forces, state.torques)
         return max(largest, members)
 
     def sum_loads(self, state) -> None:
-        """Body force and torque about the centre of mass from the owned members' contact loads."""
+        """Body force and torque about the centre of mass from the owned members' contact loads; with
+        defer_second_half left pending with the second half (module docstring)."""
+        if self.defer_second_half:
+            self._loads_pending = True
+            return
         sum_body_loads(self.count, len(self.row_body), self.row_body, self.row_levers, state.forces,
                        state.torques, self.forces, self.torques)
 
     def second_half(self, state, gravity, dt) -> None:
+        """Half kick of the free spheres; the bodies' half kick, omega and members' motion, or with
+        defer_second_half the bodies' part left pending for the next first_half (module docstring)."""
         if self.member_count < state.owned_count:  # some owned rows are free spheres
             kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities,
                               state.angular_velocities, state.forces, state.torques, state.inverse_mass,
                               state.inverse_inertia, gravity, 0.5 * dt)
+        if self._loads_pending:  # (sum_loads deferred the load sum: defer_second_half)
+            self._pending_half_dt = 0.5 * dt
+            self._pending_gravity = gravity
+            return
+        self._second_half_bodies(state, gravity, 0.5 * dt)
+
+    def finish_second_half(self, state) -> None:
+        """The pending load sum and second half of the bodies, if any: their loads, kick, omega and members'
+        velocities and spins, as sum_loads and second_half would have done them (the state every reader
+        between steps expects)."""
+        if self._pending_half_dt:
+            half_dt, self._pending_half_dt, self._loads_pending = self._pending_half_dt, 0.0, False
+            sum_body_loads(self.count, len(self.row_body), self.row_body, self.row_levers, state.forces,
+                           state.torques, self.forces, self.torques)
+            self._second_half_bodies(state, self._pending_gravity, half_dt)
+
+    def _second_half_bodies(self, state, gravity, half_dt) -> None:
         second_half_bodies(self.count, self.velocities, self.angular_momenta, self.forces, self.torques,
-                           self.inverse_masses, gravity, 0.5 * dt, self.rotations, self.principal_moments,
+                           self.inverse_masses, gravity, half_dt, self.rotations, self.principal_moments,
                            self.angular_velocities, len(self.row_body), self.row_body, self.row_levers,
                            state.velocities, state.angular_velocities)
 
     # ------------------------------------------------------------------ energies
     def energy_sums(self, state, gravity):
         """(kinetic, rotational, potential, largest squared speed) of the free spheres and the bodies."""
+        self._refuse_pending_kick("energies")
         kinetic, rotational, potential, fastest = particle_energy_sums(
             state.owned_count, state.mass, state.velocities, state.angular_velocities, state.inverse_inertia,
             state.positions, gravity, state.fields[BODY_FIELD])
@@ -294,6 +346,7 @@ class ClumpBodies(kinds.StateComponent):
     def remove_leaving(self, state, outside: np.ndarray) -> np.ndarray:
         """`outside` (owned rows leaving) grown to every member of a body one of whose members leaves;
         those bodies are dropped and the remaining members' body indices renumbered."""
+        self._refuse_pending_kick("a list rebuild")  # (every rebuild passes here first)
         body = state.fields[BODY_FIELD][:state.owned_count]
         leaving = np.unique(body[outside & (body >= 0)])
         if not len(leaving):
@@ -312,6 +365,7 @@ class ClumpBodies(kinds.StateComponent):
     def state_dict(self) -> dict:
         """Collective: the bodies' arrays as a table keyed by the rank of each id among all bodies
         (the file does not depend on the rank count), and the count of lost bodies."""
+        self._refuse_pending_kick("a checkpoint")
         comm = self.comm
         if comm is not None and comm.size > 1:
             every = np.sort(np.concatenate(comm.allgather(self.ids)))
@@ -334,6 +388,8 @@ class ClumpBodies(kinds.StateComponent):
         # The total is counted once, on rank 0.
         self.lost = int(stored["lost"]) if self.comm is None or self.comm.rank == 0 else 0
         self.replicated = True
+        self._pending_half_dt = 0.0  # the stored bodies' loads are summed and their state kicked
+        self._loads_pending = False
         self._sort()
 
 

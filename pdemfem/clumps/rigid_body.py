@@ -268,15 +268,15 @@ def kick_drift_bodies(count, positions, velocities, orientations, angular_moment
     rotation_constants(count, principal_moments, dt, work)
     no_rows = np.zeros(0, dtype=np.int64)
     first_half_bodies(count, positions, velocities, orientations, angular_momenta, forces, torques, inverse_masses,
-                      principal_moments, gravity, half_dt, dt, rotations, angular_velocities, work, 0, no_rows,
+                      principal_moments, gravity, 0.0, half_dt, dt, rotations, angular_velocities, work, 0, no_rows,
                       np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
                       np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
 
 
 @njit(cache=True)
 def first_half_bodies(count, positions, velocities, orientations, angular_momenta, forces, torques, inverse_masses,
-                      principal_moments, gravity, half_dt, dt, rotations, angular_velocities, work, row_count,
-                      row_body, row_offsets, levers, row_positions, row_velocities, row_angular_velocities,
+                      principal_moments, gravity, pending_half_dt, half_dt, dt, rotations, angular_velocities, work,
+                      row_count, row_body, row_offsets, levers, row_positions, row_velocities, row_angular_velocities,
                       positions_at_build, row_forces, row_torques):
     """The step's first half over the bodies and their members: kick_bodies(dt/2) and drift_bodies(dt)
     (the same arithmetic, the same values), rotations[i] = R(q) of the new orientation, omega from L,
@@ -286,6 +286,13 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     the next evaluation.  `work`: (ROTATION_ROWS, >= count), rows 8-14 set by rotation_constants for
     these bodies and this dt.  Returns the largest squared displacement of a member since the list build
     (inf when one is not finite).
+
+    pending_half_dt: the last step's load sum and second half kick, when they were left for this kernel
+    (ClumpBodies.sum_loads, second_half), the kick's dt/2.  The kernel then sums the member rows' loads onto
+    the bodies first (sum_body_loads, which is why the rows' loads are zeroed here and not before), and its
+    kick runs kick_bodies(pending_half_dt) and kick_bodies(half_dt) in turn on those forces and torques,
+    each value rounded as by the kernels in turn.  0.0: the bodies hold the summed loads and the kicked
+    state (no step has a half step of 0).
 
     The kick and the translation go body by body, then q and L are gathered into the columns of `work`;
     the rotation and omega go over the columns (free_rotation_columns, vectorised); a pass body by body
@@ -299,22 +306,39 @@ def first_half_bodies(count, positions, velocities, orientations, angular_moment
     momentum, force, torque = angular_momenta.reshape(-1), forces.reshape(-1), torques.reshape(-1)
     moment, rotation, spin = principal_moments.reshape(-1), rotations.reshape(-1), angular_velocities.reshape(-1)
     gravity_x, gravity_y, gravity_z = gravity[0], gravity[1], gravity[2]
+    pending = pending_half_dt != 0.0
+    if pending:  # the last step's load sum (its arguments are this kernel's own: no call of its own)
+        sum_body_loads(count, row_count, row_body, levers, row_forces, row_torques, forces, torques)
     work_w, work_x, work_y, work_z = work[0], work[1], work[2], work[3]
     work_l0, work_l1, work_l2 = work[4], work[5], work[6]
     # The kick and the translation apart from the gathering into columns: two simple loops instead of one
-    # (2000 bodies: 7.2 against 11.3 us; kick_bodies' arithmetic).
+    # (2000 bodies: 7.2 against 11.3 us; kick_bodies' arithmetic).  The pending second half kick adds the
+    # same accelerations once more before (one pass over the bodies instead of a kernel of its own).
     for i in range(count):
         k = 3 * i
         inverse_mass = inverse_masses[i]
-        v0 = velocity[k] + half_dt * (force[k] * inverse_mass + gravity_x)
-        v1 = velocity[k + 1] + half_dt * (force[k + 1] * inverse_mass + gravity_y)
-        v2 = velocity[k + 2] + half_dt * (force[k + 2] * inverse_mass + gravity_z)
+        a0 = force[k] * inverse_mass + gravity_x
+        a1 = force[k + 1] * inverse_mass + gravity_y
+        a2 = force[k + 2] * inverse_mass + gravity_z
+        v0, v1, v2 = velocity[k], velocity[k + 1], velocity[k + 2]
+        t0, t1, t2 = torque[k], torque[k + 1], torque[k + 2]
+        l0, l1, l2 = momentum[k], momentum[k + 1], momentum[k + 2]
+        if pending:
+            v0 += pending_half_dt * a0
+            v1 += pending_half_dt * a1
+            v2 += pending_half_dt * a2
+            l0 += pending_half_dt * t0
+            l1 += pending_half_dt * t1
+            l2 += pending_half_dt * t2
+        v0 += half_dt * a0
+        v1 += half_dt * a1
+        v2 += half_dt * a2
         velocity[k] = v0
         velocity[k + 1] = v1
         velocity[k + 2] = v2
-        momentum[k] += half_dt * torque[k]
-        momentum[k + 1] += half_dt * torque[k + 1]
-        momentum[k + 2] += half_dt * torque[k + 2]
+        momentum[k] = l0 + half_dt * t0
+        momentum[k + 1] = l1 + half_dt * t1
+        momentum[k + 2] = l2 + half_dt * t2
         position[k] += dt * v0
         position[k + 1] += dt * v1
         position[k + 2] += dt * v2

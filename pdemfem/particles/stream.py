@@ -173,6 +173,7 @@ class ParticleStreams(kinds.StateComponent):
         if step < self._next_due_step:
             return
         simulation.particle_system.finish_step_sum()  # the last step's sums in place before the insertion
+        simulation.particle_system.finish_clump_step()  # and the clumps' second half (the rebuild moves their rows)
         try:
             self._insert_events(simulation, step)
         finally:

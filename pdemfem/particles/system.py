@@ -490,6 +490,13 @@ class ParticleSystem(kinds.StateComponent):
             scalars = self.reductions.finish_sum()
             self._take_step_sums(scalars[0], scalars[1], int(round(scalars[2])))
 
+    def finish_clump_step(self) -> None:
+        """The clump bodies' load sum and second half, if left pending for the next step (ClumpBodies.
+        defer_second_half): their loads, kick, omega and members' velocities and spins, for whoever reads the
+        state between steps."""
+        if self.clumps is not None:
+            self.clumps.finish_second_half(self.state)
+
     def _take_step_sums(self, elastic, dissipated, contacts) -> None:
         """Book the step's totals over the ranks (the plane walls' forces and the contributors' totals are
         already summed in place)."""
