@@ -173,8 +173,9 @@ def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition
 @njit(cache=True)
 def _weights_left_of_cuts(particle_slot, coordinate, cut, weights, count):
     """Per region being split (slot), the weight of its particles below the trial cut: one pass, where
-    numpy's masks and bincount over every particle took ~120 us per bisection iteration at 20,000 particles
-    (5 ms per rebalance).  Summed in particle order, as bincount sums: the same cuts, bit for bit."""
+    numpy's masks and bincount over every particle made a bisection iteration 133 against 85 us at 20,000
+    particles (5.3 against 3.4 ms per rebalance).  Summed in particle order, as bincount sums: the same
+    cuts, bit for bit."""
     left = np.zeros(count)
     for i in range(particle_slot.shape[0]):
         slot = particle_slot[i]
