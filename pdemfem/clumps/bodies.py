@@ -126,7 +126,6 @@ class ClumpBodies(kinds.StateComponent):
         self.defer_second_half = False
         self._pending_half_dt = 0.0  # dt/2 of the pending second half kick (0.0: none; its load sum pends too)
         self._pending_gravity = None
-        self._loads_pending = False  # this step's load sum left by sum_loads, for second_half to defer its kick
         self._derive()
 
     @classmethod
@@ -269,7 +268,6 @@ class ClumpBodies(kinds.StateComponent):
             self.finish_second_half(state)
             pending_half_dt = 0.0
         self._pending_half_dt = 0.0
-        self._loads_pending = False  # (first_half_bodies sums them, pending_half_dt)
         if self.member_count < state.owned_count:  # some owned rows are free spheres
             largest = kick_drift_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.positions,
                                               state.velocities, state.angular_velocities, state.forces,
@@ -289,8 +287,7 @@ class ClumpBodies(kinds.StateComponent):
     def sum_loads(self, state) -> None:
         """Body force and torque about the centre of mass from the owned members' contact loads; with
         defer_second_half left pending with the second half (module docstring)."""
-        if self.defer_second_half:
-            self._loads_pending = True
+        if self.defer_second_half:  # (second_half leaves it pending with the kick)
             return
         sum_body_loads(self.count, len(self.row_body), self.row_body, self.row_levers, state.forces,
                        state.torques, self.forces, self.torques)
@@ -302,7 +299,7 @@ class ClumpBodies(kinds.StateComponent):
             kick_free_spheres(state.owned_count, state.fields[BODY_FIELD], state.velocities,
                               state.angular_velocities, state.forces, state.torques, state.inverse_mass,
                               state.inverse_inertia, gravity, 0.5 * dt)
-        if self._loads_pending:  # (sum_loads deferred the load sum: defer_second_half)
+        if self.defer_second_half:  # (sum_loads left the load sum to the same next first_half)
             self._pending_half_dt = 0.5 * dt
             self._pending_gravity = gravity
             return
@@ -313,7 +310,7 @@ class ClumpBodies(kinds.StateComponent):
         velocities and spins, as sum_loads and second_half would have done them (the state every reader
         between steps expects)."""
         if self._pending_half_dt:
-            half_dt, self._pending_half_dt, self._loads_pending = self._pending_half_dt, 0.0, False
+            half_dt, self._pending_half_dt = self._pending_half_dt, 0.0
             sum_body_loads(self.count, len(self.row_body), self.row_body, self.row_levers, state.forces,
                            state.torques, self.forces, self.torques)
             self._second_half_bodies(state, self._pending_gravity, half_dt)
@@ -389,7 +386,6 @@ class ClumpBodies(kinds.StateComponent):
         self.lost = int(stored["lost"]) if self.comm is None or self.comm.rank == 0 else 0
         self.replicated = True
         self._pending_half_dt = 0.0  # the stored bodies' loads are summed and their state kicked
-        self._loads_pending = False
         self._sort()
 
 
