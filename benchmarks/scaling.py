@@ -33,6 +33,10 @@ Figures per run:
                         timescale: the whole run's imbalance, its drift over blocks of 100 steps (load
                         moving between rebalances), and step-to-step changes with the machine's jitter
                         (waiting_by_timescale)
+  efficiency vs busy     strong, --busy-reference: T_busy(1) / (p T(p)), T_busy(1) the fastest one-rank run made
+                        while p-1 copies of it run beside it: what a core does when every core works, so what is
+                        left is the parallel code's own loss (ghosts, waiting, migration), not the machine's
+                        shared caches, memory bandwidth and clock
 --rebalance-threshold X sets the scene's parallel.rebalance_threshold (default 1.2).
 --repeat N runs each rank count N times, the rank counts in turn, and keeps the fastest run of each (the
 machine's speed drifts by tens of per cent within minutes; the wall times of all runs are printed too).
@@ -303,21 +307,40 @@ def solids_study(args) -> list:
     return rows
 
 
+def _command(ranks: int, particles: int, args, part: str) -> list:
+    if args.launcher:  # e.g. "srun --cpu-bind=cores" on a cluster (jobs/)
+        prefix = [*shlex.split(args.launcher), "-n", str(ranks)]
+    else:
+        prefix = [sys.executable, "-m", "pdemfem.launch", "-n", str(ranks), "--"]
+    command = [*prefix, sys.executable, str(Path(__file__).resolve()), WORKER_FLAG, part,
+               "--particles", str(particles), "--steps", str(args.steps), "--pre-steps", str(args.pre_steps),
+               "--spacing", repr(args.spacing)]
+    if args.rebalance_threshold is not None:
+        command += ["--rebalance-threshold", repr(args.rebalance_threshold)]
+    return command
+
+
 def launch(ranks: int, particles: int, args) -> dict:
     with tempfile.TemporaryDirectory(prefix="scaling-run-") as scratch:
         part = os.path.join(scratch, "run.json")
-        if args.launcher:  # e.g. "srun --cpu-bind=cores" on a cluster (jobs/)
-            prefix = [*shlex.split(args.launcher), "-n", str(ranks)]
-        else:
-            prefix = [sys.executable, "-m", "pdemfem.launch", "-n", str(ranks), "--"]
-        command = [*prefix, sys.executable, str(Path(__file__).resolve()), WORKER_FLAG, part,
-                   "--particles", str(particles), "--steps", str(args.steps), "--pre-steps", str(args.pre_steps),
-                    "--spacing", repr(args.spacing)]
-        if args.rebalance_threshold is not None:
-            command += ["--rebalance-threshold", repr(args.rebalance_threshold)]
-        subprocess.run(command, check=True, cwd=REPOSITORY)
+        subprocess.run(_command(ranks, particles, args, part), check=True, cwd=REPOSITORY)
         with open(part) as handle:
             return json.load(handle)
+
+
+def launch_side_by_side(copies: int, particles: int, args) -> list:
+    """`copies` one-rank runs of the same case at once (each on its own core): the one-rank reference with
+    the machine as busy as a `copies`-rank run keeps it (shared caches, memory bandwidth, clock)."""
+    with tempfile.TemporaryDirectory(prefix="scaling-busy-") as scratch:
+        parts = [os.path.join(scratch, f"run{copy}.json") for copy in range(copies)]
+        processes = [subprocess.Popen(_command(1, particles, args, part), cwd=REPOSITORY) for part in parts]
+        if any(process.wait() != 0 for process in processes):
+            raise RuntimeError("a side-by-side one-rank run failed (its output is above)")
+        rows = []
+        for part in parts:
+            with open(part) as handle:
+                rows.append(json.load(handle))
+        return rows
 
 
 def study(mode: str, args) -> list:
@@ -326,6 +349,7 @@ def study(mode: str, args) -> list:
     different machines; the fastest run is the closest to an undisturbed one)."""
     best = {}
     runs = {ranks: [] for ranks in args.ranks}
+    busy = []  # --busy-reference: wall seconds of the one-rank runs made side by side
     for round_index in range(args.repeat):
         for ranks in args.ranks:
             particles = args.particles if mode == "strong" else args.per_rank * ranks
@@ -335,6 +359,11 @@ def study(mode: str, args) -> list:
             runs[ranks].append(row["wall_seconds"])
             if ranks not in best or row["wall_seconds"] < best[ranks]["wall_seconds"]:
                 best[ranks] = row
+        if args.busy_reference and mode == "strong":
+            copies = max(args.ranks)
+            print(f"[{mode}] {copies} one-rank runs side by side, {args.particles} particles, "
+                  f"run {round_index + 1}/{args.repeat} ...", flush=True)
+            busy.extend(row["wall_seconds"] for row in launch_side_by_side(copies, args.particles, args))
     rows = [best[ranks] for ranks in args.ranks]
     for row in rows:
         row["wall_seconds_of_runs"] = runs[row["ranks"]]
@@ -342,6 +371,10 @@ def study(mode: str, args) -> list:
     for row in rows:
         base_per_rank = base["particle_steps_per_second"] / base["ranks"]
         row["efficiency"] = row["particle_steps_per_second"] / row["ranks"] / base_per_rank
+        if busy:
+            # The fastest side-by-side one-rank run, as every row is the fastest of its runs.
+            row["busy_reference_wall_seconds_of_runs"] = busy
+            row["efficiency_against_busy_reference"] = min(busy) / (row["ranks"] * row["wall_seconds"])
     return rows
 
 
@@ -367,6 +400,13 @@ def print_table(mode: str, rows: list) -> None:
         for row in rows:
             seconds = ", ".join(f"{value:.2f}" for value in row["wall_seconds_of_runs"])
             print(f"  {row['ranks']} rank(s), wall s of the runs in order: {seconds}")
+    if "efficiency_against_busy_reference" in rows[0]:
+        busy = rows[0]["busy_reference_wall_seconds_of_runs"]
+        print(f"  busy reference: one-rank runs made {max(row['ranks'] for row in rows)} at a time, wall s: "
+              + ", ".join(f"{value:.2f}" for value in busy))
+        print("  efficiency against the fastest of them (the machine's shared caches, memory bandwidth and clock "
+              "taken out): " + ", ".join(f"{row['ranks']} rank(s) {100 * row['efficiency_against_busy_reference']:.1f}%"
+                                         for row in rows))
 
 
 def plot(results: dict, path: Path) -> None:
@@ -415,6 +455,9 @@ def parse_arguments(argv=None):
     parser.add_argument("--repeat", type=int, default=1,
                         help="runs per rank count, taken in turn; each row is the fastest (default 1)")
     parser.add_argument("--pre-steps", type=int, default=20, help="untimed steps after the build")
+    parser.add_argument("--busy-reference", action="store_true",
+                        help="strong: in every round also run as many one-rank copies side by side as the largest "
+                             "rank count, and report the efficiency against that reference too")
     parser.add_argument("--spacing", type=float, default=COMPACT_SPACING,
                         help="lattice spacing [m] (default 2.04e-3; 2.4e-3 is settle.py's lattice, whose first "
                              "~1000 steps are free fall)")
