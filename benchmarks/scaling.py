@@ -34,7 +34,8 @@ Figures per run:
                         moving between rebalances), and step-to-step changes with the machine's jitter
                         (waiting_by_timescale)
   efficiency vs busy     strong, --busy-reference: T_busy(1) / (p T(p)), T_busy(1) the fastest one-rank run made
-                        while p-1 copies of it run beside it: what a core does when every core works, so what is
+                        while p-1 copies of it run beside it (each pinned to its own core, and the lone
+                        one-rank runs to core 0, when this machine's cores 0 .. p-1 are ours): what a core does when every core works, so what is
                         left is the parallel code's own loss (ghosts, waiting, migration), not the machine's
                         shared caches, memory bandwidth and clock; printed also from the medians of the runs
                         (plain and against the busy reference), which one fast or slow spell moves less
@@ -207,6 +208,8 @@ def worker(args) -> dict:
 
     comm = MPI.COMM_WORLD
     ranks = comm.size
+    if args.core is not None:  # --busy-reference's one-rank runs: each on its own core, the lone one too
+        os.sched_setaffinity(0, {args.core})
     with tempfile.TemporaryDirectory(prefix="scaling-bench-") as scratch:
         tiny = Simulation.from_dict(scene_dict(27 * ranks), comm=comm, output_dir=os.path.join(scratch, "tiny"))
         tiny.step(3)
@@ -308,7 +311,7 @@ def solids_study(args) -> list:
     return rows
 
 
-def _command(ranks: int, particles: int, args, part: str) -> list:
+def _command(ranks: int, particles: int, args, part: str, core=None) -> list:
     if args.launcher:  # e.g. "srun --cpu-bind=cores" on a cluster (jobs/)
         prefix = [*shlex.split(args.launcher), "-n", str(ranks)]
     else:
@@ -318,23 +321,37 @@ def _command(ranks: int, particles: int, args, part: str) -> list:
                "--spacing", repr(args.spacing)]
     if args.rebalance_threshold is not None:
         command += ["--rebalance-threshold", repr(args.rebalance_threshold)]
+    if core is not None:
+        command += ["--core", str(core)]
     return command
 
 
 def launch(ranks: int, particles: int, args) -> dict:
     with tempfile.TemporaryDirectory(prefix="scaling-run-") as scratch:
         part = os.path.join(scratch, "run.json")
-        subprocess.run(_command(ranks, particles, args, part), check=True, cwd=REPOSITORY)
+        # With --busy-reference the lone one-rank run is pinned like the side-by-side copies (to core 0), so
+        # that the two differ only in the other cores' load.
+        core = 0 if args.busy_reference and ranks == 1 and _can_pin(1, args) else None
+        subprocess.run(_command(ranks, particles, args, part, core), check=True, cwd=REPOSITORY)
         with open(part) as handle:
             return json.load(handle)
 
 
+def _can_pin(cores: int, args) -> bool:
+    """Whether one-rank runs can be pinned to cores 0 .. cores-1: the default launcher (a cluster's launcher
+    binds by its own rules) and those cores ours."""
+    return not args.launcher and hasattr(os, "sched_getaffinity") and set(range(cores)) <= os.sched_getaffinity(0)
+
+
 def launch_side_by_side(copies: int, particles: int, args) -> list:
-    """`copies` one-rank runs of the same case at once (each on its own core): the one-rank reference with
-    the machine as busy as a `copies`-rank run keeps it (shared caches, memory bandwidth, clock)."""
+    """`copies` one-rank runs of the same case at once, pinned to cores 0 .. copies-1 where this process may
+    use them: the one-rank reference with the machine as busy as a `copies`-rank run keeps it (shared caches,
+    memory bandwidth, clock)."""
     with tempfile.TemporaryDirectory(prefix="scaling-busy-") as scratch:
         parts = [os.path.join(scratch, f"run{copy}.json") for copy in range(copies)]
-        processes = [subprocess.Popen(_command(1, particles, args, part), cwd=REPOSITORY) for part in parts]
+        pin = _can_pin(copies, args)
+        processes = [subprocess.Popen(_command(1, particles, args, part, copy if pin else None), cwd=REPOSITORY)
+                     for copy, part in enumerate(parts)]
         if any(process.wait() != 0 for process in processes):
             raise RuntimeError("a side-by-side one-rank run failed (its output is above)")
         rows = []
@@ -475,6 +492,7 @@ def parse_arguments(argv=None):
     parser.add_argument("--launcher", help="MPI launcher prefix, given '-n RANKS' (default: python -m "
                         "pdemfem.launch, i.e. mpiexec with pdemfem's environment); e.g. 'srun --cpu-bind=cores'")
     parser.add_argument(WORKER_FLAG, dest="worker_json", help=argparse.SUPPRESS)
+    parser.add_argument("--core", type=int, default=None, help=argparse.SUPPRESS)
     return parser.parse_args(argv)
 
 
