@@ -33,12 +33,13 @@ Figures per run:
                         timescale: the whole run's imbalance, its drift over blocks of 100 steps (load
                         moving between rebalances), and step-to-step changes with the machine's jitter
                         (waiting_by_timescale)
-  efficiency vs busy     strong, --busy-reference: T_busy(1) / (p T(p)), T_busy(1) the fastest one-rank run made
+  efficiency vs busy    strong, --busy-reference: T_busy(1) / (p T(p)), T_busy(1) the fastest one-rank run made
                         while p-1 copies of it run beside it (each pinned to its own core, and the lone
-                        one-rank runs to core 0, when this machine's cores 0 .. p-1 are ours): what a core does when every core works, so what is
-                        left is the parallel code's own loss (ghosts, waiting, migration), not the machine's
-                        shared caches, memory bandwidth and clock; printed also from the medians of the runs
-                        (plain and against the busy reference), which one fast or slow spell moves less
+                        one-rank runs to core 0, when this machine's cores 0 .. p-1 are ours): what a core
+                        does when every core works, so what is left is the parallel code's own loss (ghosts,
+                        waiting, migration), not the machine's shared caches, memory bandwidth and clock;
+                        printed also from the medians of the runs (plain and against the busy reference),
+                        which one fast or slow spell moves less
 --rebalance-threshold X sets the scene's parallel.rebalance_threshold (default 1.2).
 --repeat N runs each rank count N times, the rank counts in turn, and keeps the fastest run of each (the
 machine's speed drifts by tens of per cent within minutes; the wall times of all runs are printed too).
