@@ -163,8 +163,9 @@ def instrument(sim, timer):
 
 def record_step_work(system, timer, steps: int):
     """Each step's time outside communication on this rank (wall time of ParticleSystem.step minus the timed
-    communication in it), filled in as the timed steps run."""
+    communication in it), and the clock at each step's start, filled in as the timed steps run."""
     work = np.zeros(steps)
+    starts = np.zeros(steps)
     original_step = system.step
     progress = {"step": 0}
 
@@ -176,9 +177,26 @@ def record_step_work(system, timer, steps: int):
         index = progress["step"]
         if index < steps:
             work[index] = elapsed - (sum(timer.seconds.values()) - communication_before)
+            starts[index] = start
         progress["step"] = index + 1
     system.step = step
-    return work
+    return work, starts
+
+
+def block_seconds(starts, end: float) -> list:
+    """Wall seconds of each block of WAITING_BLOCK_STEPS timed steps (the last block may be shorter), from
+    the clock at each step's start and at the end of the timed steps: whatever runs between the steps
+    (the run loop, the monitor) is counted in its block."""
+    boundaries = list(starts[::WAITING_BLOCK_STEPS]) + [end]
+    return [float(later - earlier) for earlier, later in zip(boundaries[:-1], boundaries[1:])]
+
+
+def floor_seconds(block_runs) -> float:
+    """The block floor: the sum over blocks of the fastest run's time for that block.  Runs of one rank
+    count compute the same steps bit for bit, so block k is the same work in every run, and the time a run
+    adds to it is the machine's (another process on the core, a slow spell of the host).  The fastest of N
+    whole runs needs every block quiet at once; this needs each block quiet in one of the N runs."""
+    return float(np.sum(np.min(np.array(block_runs), axis=0)))
 
 
 WAITING_BLOCK_STEPS = 100
@@ -225,13 +243,14 @@ def worker(args) -> dict:
         sim.step(args.pre_steps)
         timer = _CommTimer()
         instrument(sim, timer)
-        step_work = record_step_work(sim.particle_system, timer, args.steps)
+        step_work, step_starts = record_step_work(sim.particle_system, timer, args.steps)
         comm.Barrier()
         timer.reset()
         timer.rebuild_seconds, timer.rebuilds = 0.0, 0
         start = time.perf_counter()
         sim.step(args.steps)
-        elapsed = time.perf_counter() - start
+        end = time.perf_counter()
+        elapsed = end - start
         comm.Barrier()  # not timed: the step's own reductions already synchronise the ranks
         system = sim.particle_system
         local = {
@@ -246,6 +265,9 @@ def worker(args) -> dict:
             "elapsed": elapsed,
         }
         contacts = sim.contact_count()
+        # Identifies the trajectory: equal in every run of one rank count when the runs compute the same
+        # steps (the block floor's premise); the same reduction order on every run of that rank count.
+        checksum = comm.allreduce(float(np.sum(system.state.positions[:system.state.owned_count])))
         rebuilds = timer.rebuilds
         rebalances = system.rebalances
     gathered = comm.gather(local, root=0)
@@ -275,6 +297,13 @@ def worker(args) -> dict:
         "contacts_at_end": contacts,
         "build_seconds": build_seconds,
         "waiting_by_timescale": waiting_by_timescale(np.array(work)),
+        # Rank 0's clock: every step ends in a reduction over the ranks, so the ranks' blocks agree.
+        "block_wall_seconds": block_seconds(step_starts, end),
+        # The ranks' time outside the timed communication, summed: against the one-rank run's, what running
+        # on several ranks adds to the work itself (pairs across the cuts on both ranks, ghost rows in the list,
+        # the rebuild's partitioning, the cores sharing caches and memory).
+        "work_core_seconds": float(np.sum(work)),
+        "positions_checksum": checksum,
     }
 
 
@@ -368,7 +397,10 @@ def study(mode: str, args) -> list:
     different machines; the fastest run is the closest to an undisturbed one)."""
     best = {}
     runs = {ranks: [] for ranks in args.ranks}
+    blocks = {ranks: [] for ranks in args.ranks}
+    checksums = {ranks: set() for ranks in args.ranks}
     busy = []  # --busy-reference: wall seconds of the one-rank runs made side by side
+    busy_work = []  # and their work (core-seconds outside the timed communication)
     for round_index in range(args.repeat):
         for ranks in args.ranks:
             particles = args.particles if mode == "strong" else args.per_rank * ranks
@@ -376,24 +408,39 @@ def study(mode: str, args) -> list:
                   flush=True)
             row = launch(ranks, particles, args)
             runs[ranks].append(row["wall_seconds"])
+            blocks[ranks].append(row["block_wall_seconds"])
+            checksums[ranks].add(row["positions_checksum"])
             if ranks not in best or row["wall_seconds"] < best[ranks]["wall_seconds"]:
                 best[ranks] = row
         if args.busy_reference and mode == "strong":
             copies = max(args.ranks)
             print(f"[{mode}] {copies} one-rank runs side by side, {args.particles} particles, "
                   f"run {round_index + 1}/{args.repeat} ...", flush=True)
-            busy.extend(row["wall_seconds"] for row in launch_side_by_side(copies, args.particles, args))
+            for row in launch_side_by_side(copies, args.particles, args):
+                busy.append(row["wall_seconds"])
+                busy_work.append(row["work_core_seconds"])
     rows = [best[ranks] for ranks in args.ranks]
     for row in rows:
         row["wall_seconds_of_runs"] = runs[row["ranks"]]
+        # Only when every run of the rank count computed the same trajectory (same final positions, bit
+        # for bit) is block k the same work in every run.
+        if args.repeat > 1 and len(checksums[row["ranks"]]) == 1:
+            row["block_wall_seconds_of_runs"] = blocks[row["ranks"]]
+            row["block_floor_wall_seconds"] = floor_seconds(blocks[row["ranks"]])
     base = rows[0]
     for row in rows:
         base_per_rank = base["particle_steps_per_second"] / base["ranks"]
         row["efficiency"] = row["particle_steps_per_second"] / row["ranks"] / base_per_rank
+        if "block_floor_wall_seconds" in row and "block_floor_wall_seconds" in base:
+            # Weak scaling: T(1) / T(p), as the throughput per rank.
+            scale = row["particles"] / base["particles"] if mode == "weak" else 1.0
+            row["efficiency_of_block_floors"] = (base["block_floor_wall_seconds"] * base["ranks"] * scale
+                                                 / (row["ranks"] * row["block_floor_wall_seconds"]))
         if busy:
             # The fastest side-by-side one-rank run, as every row is the fastest of its runs; the medians too,
             # which a single fast or slow spell of the machine moves less.
             row["busy_reference_wall_seconds_of_runs"] = busy
+            row["busy_reference_work_core_seconds_of_runs"] = busy_work
             row["efficiency_against_busy_reference"] = min(busy) / (row["ranks"] * row["wall_seconds"])
             median_wall = float(np.median(runs[row["ranks"]]))
             row["efficiency_of_medians"] = float(np.median(runs[base["ranks"]])) * base["ranks"] / (
@@ -424,6 +471,19 @@ def print_table(mode: str, rows: list) -> None:
         for row in rows:
             seconds = ", ".join(f"{value:.2f}" for value in row["wall_seconds_of_runs"])
             print(f"  {row['ranks']} rank(s), wall s of the runs in order: {seconds}")
+    if len(rows) > 1 and all("work_core_seconds" in row for row in rows):
+        base = rows[0]
+        print("  work (time outside the timed communication, summed over the ranks; the fastest run): " + ", ".join(
+            f"{row['ranks']} rank(s) {row['work_core_seconds']:.2f} core-s"
+            + (f" ({100 * (row['work_core_seconds'] * base['particles'] / (row['particles'] * base['work_core_seconds']) - 1):+.0f} %)"
+               if row is not base else "") for row in rows))
+    if "efficiency_of_block_floors" in rows[-1]:
+        print(f"  block floor (the sum over blocks of {WAITING_BLOCK_STEPS} steps of each block's fastest run; "
+              "the runs computed the same steps bit for bit): " + ", ".join(
+                  f"{row['ranks']} rank(s) {row['block_floor_wall_seconds']:.2f} s, "
+                  f"{100 * row['efficiency_of_block_floors']:.1f}%" for row in rows))
+    elif runs > 1:
+        print("  no block floor: the runs of a rank count did not end in the same positions")
     if "efficiency_against_busy_reference" in rows[0]:
         busy = rows[0]["busy_reference_wall_seconds_of_runs"]
         print(f"  busy reference: one-rank runs made {max(row['ranks'] for row in rows)} at a time, wall s: "
