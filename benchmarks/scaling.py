@@ -40,6 +40,15 @@ Figures per run:
                         waiting, migration), not the machine's shared caches, memory bandwidth and clock;
                         printed also from the medians of the runs (plain and against the busy reference),
                         which one fast or slow spell moves less
+  work                  the ranks' time outside the timed communication, summed (core-seconds), against the
+                        one-rank run's: what running on p ranks adds to the work itself (pairs across a cut
+                        computed on both sides, ghost rows in the list, the rebuild's partitioning, cores
+                        sharing caches and memory), apart from waiting and messages
+  block floor           --repeat N: the sum over blocks of 100 timed steps of each block's fastest run, and
+                        the efficiency from it.  Runs of one rank count compute the same steps bit for bit
+                        (checked by their final positions), so block k is the same work in each run and what
+                        a run adds to its fastest time there is the machine's; the fastest whole run needs
+                        all blocks quiet at once, the floor each block quiet in one run
 --rebalance-threshold X sets the scene's parallel.rebalance_threshold (default 1.2).
 --repeat N runs each rank count N times, the rank counts in turn, and keeps the fastest run of each (the
 machine's speed drifts by tens of per cent within minutes; the wall times of all runs are printed too).
