@@ -192,6 +192,9 @@ def record_step_work(system, timer, steps: int):
     return work, starts
 
 
+WAITING_BLOCK_STEPS = 100
+
+
 def block_seconds(starts, end: float) -> list:
     """Wall seconds of each block of WAITING_BLOCK_STEPS timed steps (the last block may be shorter), from
     the clock at each step's start and at the end of the timed steps: whatever runs between the steps
@@ -206,9 +209,6 @@ def floor_seconds(block_runs) -> float:
     adds to it is the machine's (another process on the core, a slow spell of the host).  The fastest of N
     whole runs needs every block quiet at once; this needs each block quiet in one of the N runs."""
     return float(np.sum(np.min(np.array(block_runs), axis=0)))
-
-
-WAITING_BLOCK_STEPS = 100
 
 
 def waiting_by_timescale(work) -> dict:
@@ -445,6 +445,10 @@ def study(mode: str, args) -> list:
             scale = row["particles"] / base["particles"] if mode == "weak" else 1.0
             row["efficiency_of_block_floors"] = (base["block_floor_wall_seconds"] * base["ranks"] * scale
                                                  / (row["ranks"] * row["block_floor_wall_seconds"]))
+        if "work_core_seconds" in row:
+            # Per particle, as the efficiency: what the p-rank run adds to the one-rank run's work (0 for it).
+            row["work_increase"] = (row["work_core_seconds"] * base["particles"]
+                                    / (row["particles"] * base["work_core_seconds"]) - 1.0)
         if busy:
             # The fastest side-by-side one-rank run, as every row is the fastest of its runs; the medians too,
             # which a single fast or slow spell of the machine moves less.
@@ -480,12 +484,10 @@ def print_table(mode: str, rows: list) -> None:
         for row in rows:
             seconds = ", ".join(f"{value:.2f}" for value in row["wall_seconds_of_runs"])
             print(f"  {row['ranks']} rank(s), wall s of the runs in order: {seconds}")
-    if len(rows) > 1 and all("work_core_seconds" in row for row in rows):
-        base = rows[0]
+    if len(rows) > 1 and all("work_increase" in row for row in rows):
         print("  work (time outside the timed communication, summed over the ranks; the fastest run): " + ", ".join(
             f"{row['ranks']} rank(s) {row['work_core_seconds']:.2f} core-s"
-            + (f" ({100 * (row['work_core_seconds'] * base['particles'] / (row['particles'] * base['work_core_seconds']) - 1):+.0f} %)"
-               if row is not base else "") for row in rows))
+            + (f" ({100 * row['work_increase']:+.0f} %)" if row is not rows[0] else "") for row in rows))
     if "efficiency_of_block_floors" in rows[-1]:
         print(f"  block floor (the sum over blocks of {WAITING_BLOCK_STEPS} steps of each block's fastest run; "
               "the runs computed the same steps bit for bit): " + ", ".join(
