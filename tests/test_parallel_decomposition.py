@@ -213,21 +213,35 @@ def test_rows_near_box_selects_what_box_distance_selects():
             assert 0 < len(expected) < len(points)
 
 
-def test_bisection_left_weights_equal_numpy_masks_and_bincount_bitwise():
-    """The bisection's one-pass kernel against the numpy masks and bincount it replaced: the same weight
-    below each trial cut, bit for bit (both add in particle order), for particles of finished regions
-    (slot -1), several regions split at once and weights spanning many magnitudes (where a different
-    summation order would change the last bits)."""
-    from pdemfem.parallel.decomposition import _weights_left_of_cuts
+def test_histogram_cuts_find_the_weighted_median():
+    """The cut search against the exact weighted median (numpy sort and cumulative sum), for several regions
+    split at once, particles of finished regions (slot -1) left out, weights spanning many magnitudes, a heap
+    of particles at one coordinate and a region without weight.  The cut must lie in the last round's bin that
+    holds the median: within (high - low) / CUT_BINS**CUT_ROUNDS of the median particle's coordinate."""
+    from mpi4py import MPI
+
+    from pdemfem.parallel.decomposition import CUT_BINS, CUT_ROUNDS, _weighted_cuts
 
     rng = np.random.default_rng(5)
-    count = 3
-    particle_slot = rng.integers(-1, count, 20000)
-    coordinate = rng.uniform(0.0, 1.0, 20000)
-    weights = rng.uniform(0.0, 1.0, 20000) * 10.0 ** rng.integers(-8, 9, 20000)
-    for cut in (np.array([0.5, 0.1, 0.9]), np.array([0.0, 1.0, 0.37])):
-        left = (particle_slot >= 0) & (coordinate < cut[np.maximum(particle_slot, 0)])
-        expected = np.bincount(particle_slot[left], weights=weights[left], minlength=count).astype(float)
-        got = _weights_left_of_cuts(particle_slot, coordinate, cut, weights, count)
-        assert np.array_equal(got, expected)
-    assert np.all(_weights_left_of_cuts(particle_slot, coordinate, np.zeros(count), weights, count) == 0.0)
+    count = 4
+    particle_slot = rng.integers(-1, count - 1, 20000)  # slot 3 has no particles
+    coordinate = rng.uniform(0.0, 1.0, 20000) ** 3  # crowded near 0
+    coordinate[particle_slot == 1] = np.where(rng.uniform(size=np.count_nonzero(particle_slot == 1)) < 0.6,
+                                              0.25, coordinate[particle_slot == 1])  # 60 % at one coordinate
+    weights = rng.uniform(0.0, 1.0, 20000) * 10.0 ** rng.integers(-3, 4, 20000)
+    low, high = np.zeros(count), np.ones(count)
+    fractions = np.array([0.5, 0.5, 1.0 / 3.0, 0.5])
+    cuts = _weighted_cuts(MPI.COMM_SELF, particle_slot, coordinate, weights, low, high, fractions)
+    resolution = 1.0 / CUT_BINS ** CUT_ROUNDS
+    for slot in range(count - 1):
+        mine = particle_slot == slot
+        order = np.argsort(coordinate[mine], kind="stable")
+        cumulative = np.cumsum(weights[mine][order])
+        median = coordinate[mine][order][np.searchsorted(cumulative, fractions[slot] * cumulative[-1], side="right")]
+        assert abs(cuts[slot] - median) <= resolution * (1 + 1e-9), (slot, cuts[slot], median)
+        # The weight below the cut misses the target by at most the weight in that last bin (the cut goes
+        # through it linearly, as if its weight were spread evenly).
+        below = weights[mine][coordinate[mine] < cuts[slot]].sum()
+        in_last_bin = weights[mine][np.abs(coordinate[mine] - median) <= resolution].sum()
+        assert abs(below - fractions[slot] * cumulative[-1]) <= in_last_bin * (1 + 1e-12), (slot, below)
+    assert cuts[3] == 0.5  # no weight: the region is halved

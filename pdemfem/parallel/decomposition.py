@@ -3,10 +3,12 @@
 The cut tree is built from the particles' positions weighted by their cost
 (1 + contacts): at each level every group of ranks splits its region along the
 region's longest axis at the coordinate that divides the group's weight in
-proportion to the ranks on each side.  The weighted median is found by
-bisection on the coordinate with one small Allreduce per iteration, so no
-particle data is gathered anywhere.  Outer faces extend to infinity (or to the
-periodic domain), so every point in space has exactly one owner.
+proportion to the ranks on each side.  The weighted median is found from
+weight histograms along the axis, refined in CUT_ROUNDS rounds (the bin that
+holds the median is binned again), with one Allreduce of the histograms per
+round, so no particle data is gathered anywhere.  Outer faces extend to
+infinity (or to the periodic domain), so every point in space has exactly one
+owner.
 """
 from __future__ import annotations
 
@@ -17,10 +19,15 @@ from mpi4py import MPI
 from numba import njit
 
 from pdemfem import state_dict as kinds
+from pdemfem.neighbors.cells import bounding_box
 
-# Bisection iterations for each cut; 2^-40 of the region's extent is far below
-# any particle size.
-CUT_ITERATIONS = 40
+# The cut search: CUT_ROUNDS histograms of CUT_BINS bins, each over the bin of the round before that holds
+# the weighted median, then linear within the last bin: the cut lies within CUT_BINS^-CUT_ROUNDS = 1/65,536 of
+# the region's extent of the weighted median (a particle's width in a region of 65,536 particles across).
+# Bisection on the coordinate (one Allreduce per halving, 40 of them) made a rebalance cost ~2 ms per rank on
+# 2 ranks, waiting included, and rebalances rare; two rounds cost two Allreduces (docs/parallel.md).
+CUT_BINS = 256
+CUT_ROUNDS = 2
 
 
 class Decomposition:
@@ -88,13 +95,12 @@ def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition
     if size == 1:
         return Decomposition.single(lower, upper)
     weights = np.ascontiguousarray(weights, dtype=float)
-    # Finite extents for choosing axes and bisection ranges: the particles' global bounding box.
-    local_low = positions.min(axis=0) if len(positions) else np.full(3, np.inf)
-    local_high = positions.max(axis=0) if len(positions) else np.full(3, -np.inf)
-    data_low = np.empty(3)
-    data_high = np.empty(3)
-    comm.Allreduce(local_low, data_low, op=MPI.MIN)
-    comm.Allreduce(local_high, data_high, op=MPI.MAX)
+    # Finite extents for choosing axes and cut ranges: the particles' global bounding box (one MIN: -max).
+    # (bounding_box: one pass, where numpy's strided axis-0 min and max took 0.4 ms at 14,000 particles)
+    data_lower, data_upper = bounding_box(positions)
+    extents = np.concatenate([data_lower, -data_upper])
+    comm.Allreduce(MPI.IN_PLACE, extents, op=MPI.MIN)
+    data_low, data_high = extents[:3], -extents[3:]
     data_low = np.where(np.isfinite(data_low), data_low, 0.0)
     data_high = np.where(np.isfinite(data_high), data_high, 1.0)
 
@@ -121,20 +127,8 @@ def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition
         slot_of_region[splitting] = np.arange(count)
         # Particles of regions already finished (single-rank leaves) have membership -1.
         particle_slot = np.where(membership >= 0, slot_of_region[np.maximum(membership, 0)], -1)
-        active = particle_slot >= 0
         coordinate = positions[np.arange(len(positions)), axes[np.maximum(particle_slot, 0)]]
-        # astype: bincount of an empty selection returns integers, and Allreduce needs doubles everywhere.
-        totals = np.bincount(particle_slot[active], weights=weights[active], minlength=count).astype(float)
-        comm.Allreduce(MPI.IN_PLACE, totals, op=MPI.SUM)
-        cut_low, cut_high = low.copy(), high.copy()
-        for _ in range(CUT_ITERATIONS):
-            cut = 0.5 * (cut_low + cut_high)
-            left_weight = _weights_left_of_cuts(particle_slot, coordinate, cut, weights, count)
-            comm.Allreduce(MPI.IN_PLACE, left_weight, op=MPI.SUM)
-            too_heavy = left_weight > fractions * totals
-            cut_high = np.where(too_heavy, cut, cut_high)
-            cut_low = np.where(too_heavy, cut_low, cut)
-        cuts = 0.5 * (cut_low + cut_high)
+        cuts = _weighted_cuts(comm, particle_slot, coordinate, weights, low, high, fractions)
         new_regions = []
         new_index_of = {}
         for n, k in enumerate(splitting):
@@ -170,18 +164,84 @@ def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition
                          np.array(node_left, dtype=np.int64), np.array(node_right, dtype=np.int64))
 
 
+def _weighted_cuts(comm, particle_slot, coordinate, weights, low, high, fractions) -> np.ndarray:
+    """Per region being split (slot), the coordinate in [low, high] with `fractions` of the region's weight
+    below it (collective: CUT_ROUNDS Allreduces).  Each round bins the weight over the window that held the
+    median in the round before (weight below and above the window in two extra bins); the cut goes linearly
+    through the last round's median bin.  The same particles give the same cuts on any rank count up to the
+    Allreduce's summation order."""
+    count = len(low)
+    window_low = low.astype(float)
+    window_high = high.astype(float)
+    cuts = window_low.copy()
+    for _ in range(CUT_ROUNDS):
+        histogram = _cut_histogram(particle_slot, coordinate, weights, window_low, window_high, CUT_BINS, count)
+        comm.Allreduce(MPI.IN_PLACE, histogram, op=MPI.SUM)
+        _median_bins(histogram, fractions, window_low, window_high, cuts)
+    return cuts
+
+
 @njit(cache=True)
-def _weights_left_of_cuts(particle_slot, coordinate, cut, weights, count):
-    """Per region being split (slot), the weight of its particles below the trial cut: one pass, where
-    numpy's masks and bincount over every particle made a bisection iteration 133 against 85 us at 20,000
-    particles (5.3 against 3.4 ms per rebalance).  Summed in particle order, as bincount sums: the same
-    cuts, bit for bit."""
-    left = np.zeros(count)
+def _cut_histogram(particle_slot, coordinate, weights, window_low, window_high, bins, count):
+    """Weight per (slot, bin): bin 0 below the slot's window, 1 .. bins across it, bins + 1 at or above
+    its upper end; particles of finished regions (slot -1) are left out."""
+    histogram = np.zeros((count, bins + 2))
     for i in range(particle_slot.shape[0]):
         slot = particle_slot[i]
-        if slot >= 0 and coordinate[i] < cut[slot]:
-            left[slot] += weights[i]
-    return left
+        if slot < 0:
+            continue
+        value = coordinate[i]
+        lower = window_low[slot]
+        upper = window_high[slot]
+        if value < lower:
+            column = 0
+        elif value >= upper:
+            column = bins + 1
+        else:
+            column = 1 + min(bins - 1, int((value - lower) / (upper - lower) * bins))
+        histogram[slot, column] += weights[i]
+    return histogram
+
+
+@njit(cache=True)
+def _median_bins(histogram, fractions, window_low, window_high, cuts):
+    """Narrow each slot's window to the bin where the cumulative weight passes fractions x the total (in
+    place), and put the cut in it linearly by weight.  No weight at all: the cut halves the window; the
+    target beyond the window's last bin (weight at its upper end): the cut is the window's upper end."""
+    count, columns = histogram.shape
+    bins = columns - 2
+    for slot in range(count):
+        total = 0.0
+        for column in range(columns):
+            total += histogram[slot, column]
+        lower = window_low[slot]
+        width = (window_high[slot] - lower) / bins
+        if total <= 0.0:
+            cuts[slot] = lower + 0.5 * bins * width
+            window_low[slot] = cuts[slot]
+            window_high[slot] = cuts[slot]
+            continue
+        target = fractions[slot] * total
+        below = histogram[slot, 0]
+        found = -1
+        for column in range(1, bins + 1):
+            if below + histogram[slot, column] > target:
+                found = column - 1
+                break
+            below += histogram[slot, column]
+        if found < 0:
+            if histogram[slot, 0] > target:  # the median lies below the window (cannot happen after round 1)
+                cuts[slot] = lower
+            else:
+                cuts[slot] = window_high[slot]
+            window_low[slot] = cuts[slot]
+            window_high[slot] = cuts[slot]
+            continue
+        bin_low = lower + found * width
+        share = (target - below) / histogram[slot, found + 1]
+        cuts[slot] = bin_low + share * width
+        window_low[slot] = bin_low
+        window_high[slot] = bin_low + width if found < bins - 1 else window_high[slot]
 
 
 def _link(node_left, node_right, parent_slot, child):
@@ -239,3 +299,4 @@ def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_c
             weight = 1.0 + contact_cost if dx * dx + dy * dy + dz * dz < gap * gap else 1.0
             costs[i] += weight
             costs[j] += weight
+
