@@ -49,6 +49,9 @@ Figures per run:
                         (checked by their final positions), so block k is the same work in each run and what
                         a run adds to its fastest time there is the machine's; the fastest whole run needs
                         all blocks quiet at once, the floor each block quiet in one run
+  machine               (several ranks, default launcher) the cores' capacity before each round: how many
+                        cores' speed a register loop gets on p cores at once (benchmarks/core_capacity.py);
+                        p on dedicated cores, less where the virtual cores share the host's time
 --rebalance-threshold X sets the scene's parallel.rebalance_threshold (default 1.2).
 --repeat N runs each rank count N times, the rank counts in turn, and keeps the fastest run of each (the
 machine's speed drifts by tens of per cent within minutes; the wall times of all runs are printed too).
@@ -71,11 +74,13 @@ HERE = Path(__file__).resolve().parent
 REPOSITORY = HERE.parent
 sys.path.insert(0, str(HERE))
 import settle  # noqa: E402  (the settle benchmark's materials, walls and step)
+from core_capacity import core_capacity  # noqa: E402  (how much of p cores the machine gives at once)
 
 import numpy as np  # noqa: E402
 
 DEFAULT_JSON = HERE / "results" / "scaling.json"
 WORKER_FLAG = "--worker-json"
+CAPACITY_ROUNDS = 6  # register-loop rounds of the core-capacity probe before each round of runs (~0.7 s)
 COMPACT_SPACING = 2.04e-3   # lattice spacing: gaps of 0.04 mm, below the 0.3 mm skin
 
 
@@ -410,7 +415,10 @@ def study(mode: str, args) -> list:
     checksums = {ranks: set() for ranks in args.ranks}
     busy = []  # --busy-reference: wall seconds of the one-rank runs made side by side
     busy_work = []  # and their work (core-seconds outside the timed communication)
+    capacities = []  # the machine's core capacity (core_capacity.py) before each round
     for round_index in range(args.repeat):
+        if max(args.ranks) > 1 and not args.launcher:
+            capacities.append(core_capacity(max(args.ranks), rounds=CAPACITY_ROUNDS)["capacity"])
         for ranks in args.ranks:
             particles = args.particles if mode == "strong" else args.per_rank * ranks
             print(f"[{mode}] {ranks} rank(s), {particles} particles, run {round_index + 1}/{args.repeat} ...",
@@ -438,6 +446,8 @@ def study(mode: str, args) -> list:
             row["block_floor_wall_seconds"] = floor_seconds(blocks[row["ranks"]])
     base = rows[0]
     for row in rows:
+        if capacities:
+            row["core_capacity_of_rounds"] = capacities
         base_per_rank = base["particle_steps_per_second"] / base["ranks"]
         row["efficiency"] = row["particle_steps_per_second"] / row["ranks"] / base_per_rank
         if "block_floor_wall_seconds" in row and "block_floor_wall_seconds" in base:
@@ -495,6 +505,12 @@ def print_table(mode: str, rows: list) -> None:
                   f"{100 * row['efficiency_of_block_floors']:.1f}%" for row in rows))
     elif runs > 1:
         print("  no block floor: the runs of a rank count did not end in the same positions")
+    if "core_capacity_of_rounds" in rows[-1]:
+        capacities = rows[-1]["core_capacity_of_rounds"]
+        print(f"  machine: a register loop on {max(row['ranks'] for row in rows)} cores at once got "
+              + ", ".join(f"{value:.2f}" for value in capacities)
+              + f" cores' speed before the rounds (median {float(np.median(capacities)):.2f}; "
+              "benchmarks/core_capacity.py)")
     if "efficiency_against_busy_reference" in rows[0]:
         busy = rows[0]["busy_reference_wall_seconds_of_runs"]
         print(f"  busy reference: one-rank runs made {max(row['ranks'] for row in rows)} at a time, wall s: "

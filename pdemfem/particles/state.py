@@ -184,9 +184,14 @@ class ParticleState(kinds.StateComponent):
     def reorder(self, permutation: np.ndarray) -> None:
         """Permute the owned rows (ghosts must have been dropped first)."""
         assert self.ghost_count == 0, "reorder owned particles only"
+        count = len(permutation)
         for name, values in self._all_arrays():
-            self._set(name, np.ascontiguousarray(values[permutation]))
-        self._buffers.clear()  # every array is new (the next append gives it spare rows)
+            # Gathered straight into a new buffer with the spare rows _append_to leaves: the ghosts appended next
+            # then copy no row (a plain gather made them copy every array again, 0.3 ms at 20,000 particles).
+            buffer = np.empty((_spare_rows(count), *values.shape[1:]), dtype=values.dtype)
+            np.take(values, permutation, axis=0, out=buffer[:count])
+            self._buffers[name] = buffer
+            self._set(name, buffer[:count])
 
     def keep(self, rows: np.ndarray) -> None:
         """Keep only the given rows (owned), in place: the kept rows move to the front of each array, which
@@ -254,8 +259,7 @@ class ParticleState(kinds.StateComponent):
         buffer = self._buffers.get(name)
         if not (buffer is not None and values.base is buffer and held + count <= len(buffer)
                 and values.__array_interface__["data"][0] == buffer.__array_interface__["data"][0]):
-            # A fifth more than needed: the ghosts of the next rebuilds (their count drifts) fit without a copy.
-            buffer = np.empty((held + count + (held + count) // 5 + 16, *values.shape[1:]), dtype=values.dtype)
+            buffer = np.empty((_spare_rows(held + count), *values.shape[1:]), dtype=values.dtype)
             buffer[:held] = values
             self._buffers[name] = buffer
         buffer[held:held + count] = rows
@@ -321,3 +325,9 @@ class ParticleState(kinds.StateComponent):
         self.positions_at_build = self.positions.copy()
         self._buffers.clear()
         self.owned_count = count
+
+
+def _spare_rows(rows: int) -> int:
+    """A buffer's length for `rows` rows: a fifth more, so that the ghosts of the next rebuilds (their count
+    drifts) fit without a copy."""
+    return rows + rows // 5 + 16
