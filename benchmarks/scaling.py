@@ -469,6 +469,12 @@ def study(mode: str, args) -> list:
             row["efficiency_of_medians"] = float(np.median(runs[base["ranks"]])) * base["ranks"] / (
                 row["ranks"] * median_wall)
             row["efficiency_against_busy_reference_of_medians"] = float(np.median(busy)) / (row["ranks"] * median_wall)
+    if capacities and rows[-1]["ranks"] == max(args.ranks) > 1:
+        # What the machine gave p busy cores, p x efficiency / capacity: the efficiency against a p-rank run that
+        # got `capacity` cores' speed (the block floor's when there is one, else the fastest runs').
+        row = rows[-1]
+        efficiency = row.get("efficiency_of_block_floors", row["efficiency"])
+        row["efficiency_against_core_capacity"] = efficiency * row["ranks"] / float(np.median(capacities))
     return rows
 
 
@@ -511,6 +517,9 @@ def print_table(mode: str, rows: list) -> None:
               + ", ".join(f"{value:.2f}" for value in capacities)
               + f" cores' speed before the rounds (median {float(np.median(capacities)):.2f}; "
               "benchmarks/core_capacity.py)")
+        if "efficiency_against_core_capacity" in rows[-1]:
+            print(f"  efficiency against that capacity ({rows[-1]['ranks']} x efficiency / capacity, the block floor's "
+                  f"if any): {100 * rows[-1]['efficiency_against_core_capacity']:.1f}%")
     if "efficiency_against_busy_reference" in rows[0]:
         busy = rows[0]["busy_reference_wall_seconds_of_runs"]
         print(f"  busy reference: one-rank runs made {max(row['ranks'] for row in rows)} at a time, wall s: "
