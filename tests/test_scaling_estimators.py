@@ -1,4 +1,4 @@
-"""The scaling benchmark's estimators (benchmarks/scaling.py): block times and the block floor."""
+"""The scaling benchmark's estimators (benchmarks/scaling.py): block times, the block floor and the core capacity."""
 import sys
 from pathlib import Path
 
@@ -29,3 +29,18 @@ def test_block_floor_takes_each_blocks_fastest_run():
     # Never above the fastest whole run, equal to it when one run is fastest in every block.
     assert scaling.floor_seconds(runs) <= min(sum(run) for run in runs)
     assert scaling.floor_seconds([[1.0, 1.0], [2.0, 3.0]]) == 2.0
+
+
+def test_core_capacity_sums_alone_over_together_per_round(monkeypatch):
+    """The machine probe (benchmarks/core_capacity.py): per round, the sum over the cores of the loop's time alone
+    over its time with all cores busy, and the median of the rounds (the loop is shortened: only the
+    bookkeeping is tested; the machine's figure is not asserted)."""
+    import core_capacity
+
+    monkeypatch.setattr(core_capacity, "LOOP_ITERATIONS", 200_000)
+    result = core_capacity.core_capacity(1, rounds=3)
+    alone = np.array(result["alone_seconds"])
+    together = np.array(result["together_seconds"])
+    assert alone.shape == together.shape == (3, 1) and np.all(alone > 0) and np.all(together > 0)
+    assert np.allclose(result["capacity_of_rounds"], (alone / together).sum(axis=1), rtol=0, atol=1e-15)
+    assert result["capacity"] == float(np.median(result["capacity_of_rounds"]))
