@@ -245,3 +245,31 @@ def test_histogram_cuts_find_the_weighted_median():
         in_last_bin = weights[mine][np.abs(coordinate[mine] - median) <= resolution].sum()
         assert abs(below - fractions[slot] * cumulative[-1]) <= in_last_bin * (1 + 1e-12), (slot, below)
     assert cuts[3] == 0.5  # no weight: the region is halved
+
+
+def test_cut_axis_keeps_both_sides_alike_and_otherwise_the_longest():
+    """The axis choice (_axes_and_cuts): a bed cut across gravity at its cost median would give the loose upper
+    side most of the particles; an upright cut gives each side its share of both, so it is chosen.  A uniform
+    cloud is cut along its longest axis (the smallest interface); a cutoff that makes the cut's ghosts costly
+    never turns it to a shorter axis."""
+    from mpi4py import MPI
+
+    from pdemfem.parallel.decomposition import _axes_and_cuts
+
+    rng = np.random.default_rng(11)
+    dense = rng.uniform([0, 0, 0], [1, 1, 0.5], (6000, 3))
+    loose = rng.uniform([0, 0, 0.5], [1, 1, 2.0], (6000, 3))
+    positions = np.ascontiguousarray(np.vstack([dense, loose]))
+    weights = np.concatenate([np.full(6000, 5.0), np.full(6000, 1.0)])  # contacts make the bed's particles dear
+    slot = np.zeros(len(positions), dtype=np.int64)
+    lows, highs = positions.min(axis=0)[None, :], positions.max(axis=0)[None, :]
+    axes, cuts = _axes_and_cuts(MPI.COMM_SELF, slot, positions, weights, lows, highs, np.array([0.5]), 0.05)
+    assert axes[0] in (0, 1), axes  # z (the longest, index 2) would put 5/6 of the particles above the cut
+    below = positions[:, axes[0]] < cuts[0]
+    assert abs(weights[below].sum() / weights.sum() - 0.5) < 0.01  # still the cost median
+    assert abs(np.count_nonzero(below) / len(positions) - 0.5) < 0.02  # and about half the particles
+    uniform = np.ascontiguousarray(rng.uniform([0, 0, 0], [1, 1, 1.3], (12000, 3)))
+    for cutoff in (0.0, 0.05, 0.3):
+        axes, _ = _axes_and_cuts(MPI.COMM_SELF, slot, uniform, np.ones(12000), uniform.min(axis=0)[None, :],
+                                 uniform.max(axis=0)[None, :], np.array([0.5]), cutoff)
+        assert axes[0] == 2, (cutoff, axes)

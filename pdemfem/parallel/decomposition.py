@@ -28,6 +28,10 @@ from pdemfem.neighbors.cells import bounding_box
 # 2 ranks, waiting included, and rebalances rare; two rounds cost two Allreduces (docs/parallel.md).
 CUT_BINS = 256
 CUT_ROUNDS = 2
+# A region is cut along its longest axis unless another axis's cut scores this much better (_axis_scores: the
+# larger side's particles and ghosts over its share): a small gain is not worth flipping the cut at a rebalance
+# (every particle between the two cuts migrates).
+AXIS_MARGIN = 0.05
 
 
 class Decomposition:
@@ -85,11 +89,13 @@ def _owners(positions, node_axis, node_cut, node_left, node_right):
     return result
 
 
-def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition:
+def recursive_bisection(comm, positions, weights, lower, upper, ghost_cutoff: float = 0.0) -> Decomposition:
     """RCB of the region [lower, upper] over comm.size ranks (collective).
 
     `positions`/`weights` are this rank's particles; `lower`/`upper` bound the
-    region whose outer faces the boxes inherit (may be infinite).
+    region whose outer faces the boxes inherit (may be infinite); `ghost_cutoff`
+    is how far from a cut the other side's particles are ghosts (the axis choice
+    counts them, _axis_scores).
     """
     size = comm.size
     if size == 1:
@@ -119,16 +125,16 @@ def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition
         if not splitting:
             break
         count = len(splitting)
-        axes = np.array([int(np.argmax(regions[k][5] - regions[k][4])) for k in splitting])
-        low = np.array([regions[k][4][axes[n]] for n, k in enumerate(splitting)])
-        high = np.array([regions[k][5][axes[n]] for n, k in enumerate(splitting)])
+        finite_lows = np.array([regions[k][4] for k in splitting])
+        finite_highs = np.array([regions[k][5] for k in splitting])
         fractions = np.array([(regions[k][1] // 2) / regions[k][1] for k in splitting])
         slot_of_region = -np.ones(len(regions), dtype=np.int64)
         slot_of_region[splitting] = np.arange(count)
         # Particles of regions already finished (single-rank leaves) have membership -1.
         particle_slot = np.where(membership >= 0, slot_of_region[np.maximum(membership, 0)], -1)
+        axes, cuts = _axes_and_cuts(comm, particle_slot, positions, weights, finite_lows, finite_highs, fractions,
+                                    float(ghost_cutoff))
         coordinate = positions[np.arange(len(positions)), axes[np.maximum(particle_slot, 0)]]
-        cuts = _weighted_cuts(comm, particle_slot, coordinate, weights, low, high, fractions)
         new_regions = []
         new_index_of = {}
         for n, k in enumerate(splitting):
@@ -162,6 +168,122 @@ def recursive_bisection(comm, positions, weights, lower, upper) -> Decomposition
         return Decomposition.single(lower, upper)
     return Decomposition(boxes, np.array(node_axis, dtype=np.int64), np.array(node_cut, dtype=float),
                          np.array(node_left, dtype=np.int64), np.array(node_right, dtype=np.int64))
+
+
+def _axes_and_cuts(comm, particle_slot, positions, weights, finite_lows, finite_highs, fractions, ghost_cutoff):
+    """Per region being split (slot): the axis to cut and the cut (collective: CUT_ROUNDS Allreduces).
+
+    The first round bins the weight and the particle count along all three axes at once; each axis's cut
+    there is scored by _axis_scores and the axis chosen (the longest unless another scores AXIS_MARGIN
+    better); the later rounds refine the chosen axis's cut as _weighted_cuts does."""
+    count = len(fractions)
+    bins = CUT_BINS if count <= 64 else CUT_BINS // 4  # many regions at once (many ranks): a smaller message
+    window_low = np.ascontiguousarray(finite_lows, dtype=float)
+    window_high = np.ascontiguousarray(finite_highs, dtype=float)
+    histogram = _axis_histograms(particle_slot, positions, weights, window_low, window_high, bins, count)
+    comm.Allreduce(MPI.IN_PLACE, histogram, op=MPI.SUM)
+    cuts_by_axis = np.empty((3, count))
+    low_by_axis = np.empty((3, count))
+    high_by_axis = np.empty((3, count))
+    scores = np.empty((3, count))
+    for axis in range(3):
+        low_by_axis[axis] = window_low[:, axis]
+        high_by_axis[axis] = window_high[:, axis]
+        # (narrows low/high_by_axis to the median bins, where the later rounds go on)
+        _median_bins(np.ascontiguousarray(histogram[:, axis, 0]), fractions, low_by_axis[axis], high_by_axis[axis],
+                     cuts_by_axis[axis])
+        scores[axis] = _axis_scores(np.ascontiguousarray(histogram[:, axis, 1]), np.ascontiguousarray(window_low[:, axis]),
+                                    np.ascontiguousarray(window_high[:, axis]), cuts_by_axis[axis], ghost_cutoff,
+                                    fractions)
+    longest = np.argmax(window_high - window_low, axis=1)
+    best = np.argmin(scores, axis=0)
+    slots = np.arange(count)
+    axes = np.where(scores[best, slots] < scores[longest, slots] - AXIS_MARGIN, best, longest)
+    cuts = cuts_by_axis[axes, slots]
+    low = low_by_axis[axes, slots]
+    high = high_by_axis[axes, slots]
+    coordinate = positions[np.arange(len(positions)), axes[np.maximum(particle_slot, 0)]]
+    for _ in range(CUT_ROUNDS - 1):
+        histogram = _cut_histogram(particle_slot, coordinate, weights, low, high, CUT_BINS, count)
+        comm.Allreduce(MPI.IN_PLACE, histogram, op=MPI.SUM)
+        _median_bins(histogram, fractions, low, high, cuts)
+    return axes, cuts
+
+
+@njit(cache=True)
+def _axis_histograms(particle_slot, positions, weights, window_low, window_high, bins, count):
+    """Per (slot, axis): the weight ([.., 0, ..]) and the particle count ([.., 1, ..]) binned as _cut_histogram
+    bins them, over the slot's window along each axis."""
+    histogram = np.zeros((count, 3, 2, bins + 2))
+    for i in range(particle_slot.shape[0]):
+        slot = particle_slot[i]
+        if slot < 0:
+            continue
+        for axis in range(3):
+            value = positions[i, axis]
+            lower = window_low[slot, axis]
+            upper = window_high[slot, axis]
+            if value < lower:
+                column = 0
+            elif value >= upper:
+                column = bins + 1
+            else:
+                column = 1 + min(bins - 1, int((value - lower) / (upper - lower) * bins))
+            histogram[slot, axis, 0, column] += weights[i]
+            histogram[slot, axis, 1, column] += 1.0
+    return histogram
+
+
+@njit(cache=True)
+def _axis_scores(counts, window_low, window_high, cuts, ghost_cutoff, fractions):
+    """Per slot: max over the two sides of (owned particles + ghosts) / the side's fair share of the particles,
+    for a cut at `cuts` with the count histogram `counts` (as _cut_histogram bins).  1 is the best: both sides
+    hold their share and no particle is near the cut.
+
+    The cut balances the cost model's weight; the particle count is what the rest of the work goes with (the
+    list build of a rebuild step, the integration, the ghosts), and where the two sides hold alike parts of the
+    scene the model's errors cancel.  A settling bed cut across gravity gave the upper rank 1.4-1.5x the
+    particles (it balanced the lower rank's contacts with them), so its rebuild steps took 1.5-2 ms more; cut
+    upright, both halves were alike, at twice the ghosts (docs/parallel.md)."""
+    count, columns = counts.shape
+    bins = columns - 2
+    scores = np.empty(count)
+    for slot in range(count):
+        lower = window_low[slot]
+        width = (window_high[slot] - lower) / bins
+        cut = cuts[slot]
+        below = counts[slot, 0]
+        above = counts[slot, bins + 1]
+        band_below = 0.0
+        band_above = 0.0
+        for column in range(1, bins + 1):
+            bin_low = lower + (column - 1) * width
+            bin_high = bin_low + width
+            value = counts[slot, column]
+            if width > 0.0:
+                below_part = min(max((cut - bin_low) / width, 0.0), 1.0)
+            else:
+                below_part = 1.0 if bin_low < cut else 0.0
+            below += value * below_part
+            above += value * (1.0 - below_part)
+            if width > 0.0 and value > 0.0:
+                # the part of the bin within the ghost cutoff of the cut, on either side
+                near_low = max(bin_low, cut - ghost_cutoff)
+                near_high = min(bin_high, cut)
+                if near_high > near_low:
+                    band_below += value * (near_high - near_low) / width
+                near_low = max(bin_low, cut)
+                near_high = min(bin_high, cut + ghost_cutoff)
+                if near_high > near_low:
+                    band_above += value * (near_high - near_low) / width
+        total = below + above
+        if total <= 0.0:
+            scores[slot] = 1.0
+            continue
+        fraction = fractions[slot]
+        scores[slot] = max((below + band_above) / (fraction * total),
+                           (above + band_below) / ((1.0 - fraction) * total))
+    return scores
 
 
 def _weighted_cuts(comm, particle_slot, coordinate, weights, low, high, fractions) -> np.ndarray:

@@ -328,7 +328,7 @@ class ParticleSystem(kinds.StateComponent):
                     force_rebalance or self.decomposition is None or self._imbalance(costs) > self.rebalance_threshold):
                 before = self._imbalance(costs)
                 self.decomposition = recursive_bisection(self.comm, state.positions, costs[:state.owned_count],
-                                                         self.domain_lower, self.domain_upper)
+                                                         self.domain_lower, self.domain_upper, self.ghost_cutoff)
                 self.ghosts = GhostExchange(self.comm, self.decomposition, self.ghost_cutoff, self.periodic_lengths)
                 self.rebalances += 1
                 self._pending_rebalance_log = before
