@@ -37,8 +37,7 @@ def _register_loop(iterations):
 def _timed_loop(core, start, results, slot):
     if core is not None:
         os.sched_setaffinity(0, {core})
-    if start is not None:
-        start.wait()
+    start.wait()
     began = time.perf_counter()
     _register_loop(LOOP_ITERATIONS)
     results[slot] = time.perf_counter() - began

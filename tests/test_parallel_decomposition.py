@@ -220,7 +220,7 @@ def test_histogram_cuts_find_the_weighted_median():
     holds the median: within (high - low) / CUT_BINS**CUT_ROUNDS of the median particle's coordinate."""
     from mpi4py import MPI
 
-    from pdemfem.parallel.decomposition import CUT_BINS, CUT_ROUNDS, _weighted_cuts
+    from pdemfem.parallel.decomposition import CUT_BINS, CUT_ROUNDS, _axes_and_cuts
 
     rng = np.random.default_rng(5)
     count = 4
@@ -229,9 +229,13 @@ def test_histogram_cuts_find_the_weighted_median():
     coordinate[particle_slot == 1] = np.where(rng.uniform(size=np.count_nonzero(particle_slot == 1)) < 0.6,
                                               0.25, coordinate[particle_slot == 1])  # 60 % at one coordinate
     weights = rng.uniform(0.0, 1.0, 20000) * 10.0 ** rng.integers(-3, 4, 20000)
-    low, high = np.zeros(count), np.ones(count)
     fractions = np.array([0.5, 0.5, 1.0 / 3.0, 0.5])
-    cuts = _weighted_cuts(MPI.COMM_SELF, particle_slot, coordinate, weights, low, high, fractions)
+    # The same coordinate along all three axes and a unit cube per region: every axis scores alike and the
+    # cut goes along x, the search under test.
+    positions = np.ascontiguousarray(np.repeat(coordinate[:, None], 3, axis=1))
+    axes, cuts, _ = _axes_and_cuts(MPI.COMM_SELF, particle_slot, positions, weights, np.zeros((count, 3)),
+                                   np.ones((count, 3)), fractions, 0.0)
+    assert np.all(axes == 0)
     resolution = 1.0 / CUT_BINS ** CUT_ROUNDS
     for slot in range(count - 1):
         mine = particle_slot == slot
@@ -263,13 +267,13 @@ def test_cut_axis_keeps_both_sides_alike_and_otherwise_the_longest():
     weights = np.concatenate([np.full(6000, 5.0), np.full(6000, 1.0)])  # contacts make the bed's particles dear
     slot = np.zeros(len(positions), dtype=np.int64)
     lows, highs = positions.min(axis=0)[None, :], positions.max(axis=0)[None, :]
-    axes, cuts = _axes_and_cuts(MPI.COMM_SELF, slot, positions, weights, lows, highs, np.array([0.5]), 0.05)
+    axes, cuts, _ = _axes_and_cuts(MPI.COMM_SELF, slot, positions, weights, lows, highs, np.array([0.5]), 0.05)
     assert axes[0] in (0, 1), axes  # z (the longest, index 2) would put 5/6 of the particles above the cut
     below = positions[:, axes[0]] < cuts[0]
     assert abs(weights[below].sum() / weights.sum() - 0.5) < 0.01  # still the cost median
     assert abs(np.count_nonzero(below) / len(positions) - 0.5) < 0.02  # and about half the particles
     uniform = np.ascontiguousarray(rng.uniform([0, 0, 0], [1, 1, 1.3], (12000, 3)))
     for cutoff in (0.0, 0.05, 0.3):
-        axes, _ = _axes_and_cuts(MPI.COMM_SELF, slot, uniform, np.ones(12000), uniform.min(axis=0)[None, :],
-                                 uniform.max(axis=0)[None, :], np.array([0.5]), cutoff)
+        axes, _, _ = _axes_and_cuts(MPI.COMM_SELF, slot, uniform, np.ones(12000), uniform.min(axis=0)[None, :],
+                                    uniform.max(axis=0)[None, :], np.array([0.5]), cutoff)
         assert axes[0] == 2, (cutoff, axes)

@@ -132,9 +132,8 @@ def recursive_bisection(comm, positions, weights, lower, upper, ghost_cutoff: fl
         slot_of_region[splitting] = np.arange(count)
         # Particles of regions already finished (single-rank leaves) have membership -1.
         particle_slot = np.where(membership >= 0, slot_of_region[np.maximum(membership, 0)], -1)
-        axes, cuts = _axes_and_cuts(comm, particle_slot, positions, weights, finite_lows, finite_highs, fractions,
-                                    float(ghost_cutoff))
-        coordinate = positions[np.arange(len(positions)), axes[np.maximum(particle_slot, 0)]]
+        axes, cuts, coordinate = _axes_and_cuts(comm, particle_slot, positions, weights, finite_lows, finite_highs,
+                                                fractions, float(ghost_cutoff))
         new_regions = []
         new_index_of = {}
         for n, k in enumerate(splitting):
@@ -175,7 +174,10 @@ def _axes_and_cuts(comm, particle_slot, positions, weights, finite_lows, finite_
 
     The first round bins the weight and the particle count along all three axes at once; each axis's cut
     there is scored by _axis_scores and the axis chosen (the longest unless another scores AXIS_MARGIN
-    better); the later rounds refine the chosen axis's cut as _weighted_cuts does."""
+    better); each later round bins the weight along the chosen axis over the bin of the round before that holds
+    the median, and the cut goes linearly through the last round's median bin.  The same particles give the same
+    cuts on any rank count up to the Allreduce's summation order.  Returns (axes, cuts, each particle's
+    coordinate along its region's axis)."""
     count = len(fractions)
     bins = CUT_BINS if count <= 64 else CUT_BINS // 4  # many regions at once (many ranks): a smaller message
     window_low = np.ascontiguousarray(finite_lows, dtype=float)
@@ -207,28 +209,20 @@ def _axes_and_cuts(comm, particle_slot, positions, weights, finite_lows, finite_
         histogram = _cut_histogram(particle_slot, coordinate, weights, low, high, CUT_BINS, count)
         comm.Allreduce(MPI.IN_PLACE, histogram, op=MPI.SUM)
         _median_bins(histogram, fractions, low, high, cuts)
-    return axes, cuts
+    return axes, cuts, coordinate
 
 
 @njit(cache=True)
 def _axis_histograms(particle_slot, positions, weights, window_low, window_high, bins, count):
-    """Per (slot, axis): the weight ([.., 0, ..]) and the particle count ([.., 1, ..]) binned as _cut_histogram
-    bins them, over the slot's window along each axis."""
+    """Per (slot, axis): the weight ([.., 0, ..]) and the particle count ([.., 1, ..]) in the columns of _bin_of,
+    over the slot's window along each axis."""
     histogram = np.zeros((count, 3, 2, bins + 2))
     for i in range(particle_slot.shape[0]):
         slot = particle_slot[i]
         if slot < 0:
             continue
         for axis in range(3):
-            value = positions[i, axis]
-            lower = window_low[slot, axis]
-            upper = window_high[slot, axis]
-            if value < lower:
-                column = 0
-            elif value >= upper:
-                column = bins + 1
-            else:
-                column = 1 + min(bins - 1, int((value - lower) / (upper - lower) * bins))
+            column = _bin_of(positions[i, axis], window_low[slot, axis], window_high[slot, axis], bins)
             histogram[slot, axis, 0, column] += weights[i]
             histogram[slot, axis, 1, column] += 1.0
     return histogram
@@ -286,23 +280,6 @@ def _axis_scores(counts, window_low, window_high, cuts, ghost_cutoff, fractions)
     return scores
 
 
-def _weighted_cuts(comm, particle_slot, coordinate, weights, low, high, fractions) -> np.ndarray:
-    """Per region being split (slot), the coordinate in [low, high] with `fractions` of the region's weight
-    below it (collective: CUT_ROUNDS Allreduces).  Each round bins the weight over the window that held the
-    median in the round before (weight below and above the window in two extra bins); the cut goes linearly
-    through the last round's median bin.  The same particles give the same cuts on any rank count up to the
-    Allreduce's summation order."""
-    count = len(low)
-    window_low = low.astype(float)
-    window_high = high.astype(float)
-    cuts = window_low.copy()
-    for _ in range(CUT_ROUNDS):
-        histogram = _cut_histogram(particle_slot, coordinate, weights, window_low, window_high, CUT_BINS, count)
-        comm.Allreduce(MPI.IN_PLACE, histogram, op=MPI.SUM)
-        _median_bins(histogram, fractions, window_low, window_high, cuts)
-    return cuts
-
-
 @njit(cache=True)
 def _cut_histogram(particle_slot, coordinate, weights, window_low, window_high, bins, count):
     """Weight per (slot, bin): bin 0 below the slot's window, 1 .. bins across it, bins + 1 at or above
@@ -312,17 +289,18 @@ def _cut_histogram(particle_slot, coordinate, weights, window_low, window_high, 
         slot = particle_slot[i]
         if slot < 0:
             continue
-        value = coordinate[i]
-        lower = window_low[slot]
-        upper = window_high[slot]
-        if value < lower:
-            column = 0
-        elif value >= upper:
-            column = bins + 1
-        else:
-            column = 1 + min(bins - 1, int((value - lower) / (upper - lower) * bins))
-        histogram[slot, column] += weights[i]
+        histogram[slot, _bin_of(coordinate[i], window_low[slot], window_high[slot], bins)] += weights[i]
     return histogram
+
+
+@njit(inline="always", cache=True)
+def _bin_of(value, lower, upper, bins):
+    """The histogram column of `value`: 0 below [lower, upper), 1 .. bins across it, bins + 1 at or above upper."""
+    if value < lower:
+        return 0
+    if value >= upper:
+        return bins + 1
+    return 1 + min(bins - 1, int((value - lower) / (upper - lower) * bins))
 
 
 @njit(cache=True)
@@ -421,4 +399,3 @@ def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_c
             weight = 1.0 + contact_cost if dx * dx + dy * dy + dz * dz < gap * gap else 1.0
             costs[i] += weight
             costs[j] += weight
-
