@@ -44,9 +44,10 @@ def _kernel_results(kernels, system):
     pair_history, wall_history = neighbors.history.copy(), walls.candidate_history.copy()
     wall_forces, wall_heat = np.zeros_like(walls.forces), np.zeros(walls.count)
     pair_totals = kernels.pair_forces(
-        neighbors.row_particles, neighbors.offsets, neighbors.partners, pair_history, state.ids, state.owned_count,
-        state.positions, state.velocities, state.angular_velocities, state.radii, state.mass, state.inverse_inertia,
-        state.material_index, tables.coefficients, tables.composition, system.dt, *loads, temperatures, heat_flows)
+        neighbors.row_particles, neighbors.offsets[:-1], neighbors.offsets[1:], neighbors.partners, pair_history,
+        state.ids, state.owned_count, state.positions, state.velocities, state.angular_velocities, state.radii,
+        state.mass, state.inverse_inertia, state.material_index, tables.coefficients, tables.composition, system.dt,
+        *loads, temperatures, heat_flows)
     wall_totals = kernels.plane_wall_forces(
         walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities,
         walls.material_index, wall_history, state.positions, state.velocities, state.angular_velocities,

@@ -89,6 +89,42 @@ def test_list_build_holds_every_pair_within_the_cutoff_once(seed):
     assert listed == sorted(zip(i[near].tolist(), j[near].tolist()))  # sorted lists: a pair listed twice fails
 
 
+
+def test_split_puts_each_rows_pairs_of_owned_particles_first():
+    """VerletList's split at the ghosts (the interior pass runs while the ghosts' update travels): each row
+    keeps its partners, the owned ones first and in their order, then the ghosts in theirs; interior_ends
+    marks the border; a ghost's row is all boundary."""
+    from pdemfem.neighbors.cells import cell_grid, cell_indices, sort_by_cell
+    from pdemfem.neighbors.verlet import _FORWARD_ROWS, _fill_pairs, _owned_partners_first
+
+    rng = np.random.default_rng(7)
+    count, owned = 1500, 1000
+    positions = rng.random((count, 3)) * 0.012
+    radii = rng.uniform(0.5e-3, 1.0e-3, count)
+    lower, size, dimensions = cell_grid(positions, 2.0 * radii.max() + 0.3e-3)
+    cells = cell_indices(positions, lower, size, dimensions)
+    order, starts = sort_by_cell(cells, int(np.prod(dimensions)))
+    offsets = np.empty(count + 1, dtype=np.int64)
+    partners = np.empty(100 * count, dtype=np.int32)
+    written = _fill_pairs(np.ascontiguousarray(positions[order]), radii[order], 0.3e-3, owned, order, cells[order],
+                          starts, dimensions, _FORWARD_ROWS, np.zeros(count, np.int32), np.zeros((1, 1)), False,
+                          offsets, partners)
+    before = partners[:written].copy()
+    interior_ends = np.empty(count, dtype=np.int64)
+    boundary_rows = _owned_partners_first(order, offsets, partners[:written], owned, interior_ends)
+    with_ghost_rows = 0
+    for p in range(count):
+        row, split = partners[offsets[p]:offsets[p + 1]], interior_ends[p] - offsets[p]
+        original = before[offsets[p]:offsets[p + 1]]
+        if order[p] >= owned:
+            assert split == 0
+        else:
+            assert row[:split].tolist() == [j for j in original if j < owned]
+            assert row[split:].tolist() == [j for j in original if j >= owned]
+        with_ghost_rows += split < len(row)
+    assert boundary_rows == with_ghost_rows > 0
+    assert np.count_nonzero(before >= owned) > 0  # owned rows with ghost partners were there to move
+
 def _sliding_pair(tangential_speed):
     """Two spheres in an oblique contact (relative normal speed 0.1 m/s, mu = 0.3) with spectators
     around them, so that a rebuild re-sorts the particles (cell order != id order).

@@ -196,7 +196,7 @@ def test_contact_kernels_report_the_deepest_overlap_over_the_smaller_radius():
     coefficients[:, :, 0] = 1e7  # E*
     coefficients[:, :, 1] = 4e6  # G*
     history = np.zeros((1, 4))
-    *_, deepest = pair_forces(np.array([0]), np.array([0, 1, 1]), np.array([1], dtype=np.int32), history,
+    *_, deepest = pair_forces(np.array([0]), np.array([0]), np.array([1]), np.array([1], dtype=np.int32), history,
                               np.arange(2), 2, positions, zeros.copy(), zeros.copy(), radii, mass, np.ones(2),
                               np.zeros(2, dtype=np.int32), coefficients, TANGENTIAL, 1e-7, zeros.copy(),
                               zeros.copy(), np.zeros(0), np.zeros((0, 2)))

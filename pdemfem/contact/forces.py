@@ -34,10 +34,12 @@ CONTRACT = {"contract"}
 
 
 @njit(cache=True, fastmath=CONTRACT)
-def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history, ids, owned_count,
+def pair_forces(row_particles, pair_starts, pair_ends, neighbor_partners, pair_history, ids, owned_count,
                 positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
                 coefficients, composition, dt, forces, torques, temperatures, heat_flows):
-    """Add the forces of all sphere-sphere contacts of the half list (row r is particle row_particles[r]).
+    """Add the forces of the sphere-sphere contacts of the half list's rows: row r is particle
+    row_particles[r] and its pairs are the list slots pair_starts[r] .. pair_ends[r] - 1 (a CSR list:
+    offsets[:-1], offsets[1:]; VerletList.interior / .boundary: its pairs without / with a ghost).
 
     With heat on (composition), every contact also conducts: heat_flows[i] gets (Q, H) and the partner
     (-Q, H) (pdemfem.particles.heat); temperatures and heat_flows are unused (may be empty) otherwise.
@@ -63,7 +65,7 @@ def pair_forces(row_particles, neighbor_offsets, neighbor_partners, pair_history
         zi = positions[i, 2]
         radius_i = radii[i]
         material_i = material_index[i]
-        for row in range(neighbor_offsets[r], neighbor_offsets[r + 1]):
+        for row in range(pair_starts[r], pair_ends[r]):
             j = neighbor_partners[row]
             dx = xi - positions[j, 0]
             dy = yi - positions[j, 1]

@@ -88,13 +88,49 @@ def _fill_pairs(sorted_positions, sorted_radii, skin, owned_count, order, sorted
     return written
 
 
+@njit(cache=True)
+def _owned_partners_first(order, offsets, partners, owned_count, interior_ends):
+    """Reorder each row's partners, owned ones first (stable), and set interior_ends[p] to the end of the
+    owned ones: [offsets[p], interior_ends[p]) are the row's pairs of two owned particles, which need no
+    ghost's current state, [interior_ends[p], offsets[p + 1]) its pairs with a ghost.  A ghost's row holds
+    only pairs with a ghost (its own).  Returns the number of rows with pairs with a ghost."""
+    longest = 0
+    for p in range(order.shape[0]):
+        longest = max(longest, offsets[p + 1] - offsets[p])
+    with_ghosts = np.empty(longest, dtype=partners.dtype)
+    boundary_rows = 0
+    for p in range(order.shape[0]):
+        start = offsets[p]
+        end = offsets[p + 1]
+        if order[p] >= owned_count:
+            interior_ends[p] = start
+        else:
+            written = start
+            ghosts = 0
+            for slot in range(start, end):
+                j = partners[slot]
+                if j < owned_count:
+                    partners[written] = j
+                    written += 1
+                else:
+                    with_ghosts[ghosts] = j
+                    ghosts += 1
+            for k in range(ghosts):
+                partners[written + k] = with_ghosts[k]
+            interior_ends[p] = written
+        if interior_ends[p] < end:
+            boundary_rows += 1
+    return boundary_rows
+
+
 # A buffer more than this many times the list's size is given back (many particles left the domain).
 _LARGEST_BUFFER_SLACK = 4
 
 
 class VerletList:
     """row_particles (rows), offsets (rows+1), partners (int32), history (pairs, width) aligned with partners
-    (partners and history are the leading rows of buffers reused by the next build).
+    (partners and history are the leading rows of buffers reused by the next build); `interior` and
+    `boundary`: the (row particles, pair starts, pair ends) of the pairs without and with a ghost.
 
     `history_signs` (one per history column: -1 for a spring, +1 for a symmetric flag) sets the
     history width (0: no history, e.g. frictionless spheres); `cohesion_reach[a, b]` [m] widens
@@ -115,6 +151,7 @@ class VerletList:
         self.offsets = np.zeros(1, dtype=np.int64)
         self.partners = np.zeros(0, dtype=np.int32)
         self.history = np.zeros((0, len(self.history_signs)))
+        self.interior = self.boundary = (self.row_particles, self.offsets[:0], self.offsets[:0])
         self.builds = 0
         # Contact records loaded from a checkpoint: used by the next build instead of this list's.
         self._loaded_records = None
@@ -170,11 +207,28 @@ class VerletList:
         self.row_particles = order
         self.offsets = offsets
         self.partners = self._partner_buffer[:needed]
+        self._split_at_ghosts(state.owned_count)
         self.history = self._history_buffer[:needed]
         self.history[:] = 0.0
         self._restore(state.ids, state.owned_count, records)
         self._loaded_records = None
         self.builds += 1
+
+    def _split_at_ghosts(self, owned_count: int) -> None:
+        """Order each row's partners so that its pairs of two owned particles come first, and keep the row
+        ranges of both kinds: `interior` (row_particles, starts, ends) over every row, `boundary` over the
+        rows with pairs with a ghost.  The force pass over the interior needs no ghost's state, so it runs
+        while the ghosts' per-step update travels (ParticleSystem.step)."""
+        order, offsets = self.row_particles, self.offsets
+        if owned_count == len(order):  # no ghosts: every pair is interior
+            self.interior = (order, offsets[:-1], offsets[1:])
+            self.boundary = (order[:0], offsets[:0], offsets[:0])
+            return
+        interior_ends = np.empty(len(order), dtype=np.int64)
+        _owned_partners_first(order, offsets, self.partners, owned_count, interior_ends)
+        rows = np.flatnonzero(interior_ends < offsets[1:])
+        self.interior = (order, offsets[:-1], interior_ends)
+        self.boundary = (order[rows], interior_ends[rows], offsets[1:][rows])
 
     def contact_records(self, ids: np.ndarray, owned_count: int, wall_candidates=None) -> np.ndarray:
         """History of the springs in use, one row per owned particle in contact (see module doc), followed by

@@ -126,10 +126,13 @@ class GhostExchange:
         self.neighbours = sorted({target[0] for target in self.targets})
         self.index_map = None
         self.step_scatter = None
+        self._receives = []
+        self._sends = []
 
     def plan_and_send(self, state) -> None:
         """Choose the ghosts to send (at a rebuild), send them in full, append those received, and
         size the per-step scatter's buffers for the new index map."""
+        self.complete_sends()
         owned = state.owned_count
         positions = state.positions[:owned]
         rows = {neighbour: [] for neighbour in self.neighbours}
@@ -162,15 +165,42 @@ class GhostExchange:
     def update(self, state) -> None:
         """Refresh the ghosts' `ghost_step` fields (every step between rebuilds): owned rows packed into
         the preallocated send buffers, received into the preallocated receive buffers."""
+        self.start_update(state)
+        self.finish_update(state)
+
+    def start_update(self, state) -> None:
+        """The first half of update: pack and post the messages.  Work that reads no ghost (the pairs of two
+        owned particles) can run before finish_update, while they travel."""
         if not self.neighbours:
             return
+        self.complete_sends()
         scatter = self.step_scatter
         if scatter.registry_version != state.registry_version:  # a field was registered since the rebuild
             scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
         scatter.pack(state)
-        received = self._exchange(scatter.send_buffers, scatter.width, _GHOST_UPDATE_TAG,
-                                  counts=self.index_map.receive_counts, receive_buffers=scatter.receive_buffers)
-        scatter.unpack(state, received)
+        comm, rank = self.comm, self.comm.rank
+        self._receives = [comm.Irecv(scatter.receive_buffers[n], source=n, tag=_GHOST_UPDATE_TAG)
+                          for n in self.neighbours if n != rank]
+        self._sends = [comm.Isend(scatter.send_buffers[n], dest=n, tag=_GHOST_UPDATE_TAG)
+                       for n in self.neighbours if n != rank]
+
+    def finish_update(self, state) -> None:
+        """The second half of update: wait for the neighbours' rows and write them over the ghost rows.  The
+        sends are completed later (complete_sends: at the next update or rebuild); waiting for them here would
+        wait until every neighbour has reached its own finish_update, a rendezvous the receives do not need."""
+        if not self.neighbours:
+            return
+        MPI.Request.Waitall(self._receives)
+        self._receives = []
+        scatter, rank = self.step_scatter, self.comm.rank
+        scatter.unpack(state, {n: scatter.send_buffers[n] if n == rank else scatter.receive_buffers[n]
+                               for n in self.neighbours})
+
+    def complete_sends(self) -> None:
+        """Wait for the last update's sends (their buffers are reused, or dropped with this exchange)."""
+        if self._sends:
+            MPI.Request.Waitall(self._sends)
+            self._sends = []
 
     def _exchange(self, outgoing: dict, width: int, tag: int, counts, receive_buffers=None) -> dict:
         """Point-to-point rows to every neighbour; `counts` None: the counts are exchanged first.

@@ -198,9 +198,12 @@ class ParticleSystem(kinds.StateComponent):
         largest_displacement = self.largest_displacement + self.walls.largest_displacement_since_build()
         if 2.0 * largest_displacement > self.skin:
             self._rebuild()
-        elif self.ghosts is not None:
-            self.ghosts.update(state)
-        self._compute_forces()
+            self._compute_forces()
+        else:
+            # The ghosts' update travels while the pairs of two owned particles are computed.
+            if self.ghosts is not None:
+                self.ghosts.start_update(state)
+            self._compute_forces(self.ghosts)
         if self.clumps is not None:
             self.clumps.second_half(state, self.gravity, dt)
         else:
@@ -231,7 +234,7 @@ class ParticleSystem(kinds.StateComponent):
             state.add_field(f"carry:{name}", (3,), checkpoint=False)[:] = getattr(state, name)
         if decomposition is not None:
             self.decomposition = decomposition
-            self.ghosts = GhostExchange(self.comm, decomposition, self.ghost_cutoff, self.periodic_lengths)
+            self._replace_ghosts(GhostExchange(self.comm, decomposition, self.ghost_cutoff, self.periodic_lengths))
         self._rebuild(records=records, canonical=True)
         for name in ("forces", "torques"):
             setattr(state, name, state.remove_field(f"carry:{name}"))
@@ -271,10 +274,10 @@ class ParticleSystem(kinds.StateComponent):
         decomposition = stored.get("decomposition")
         if decomposition is not None and len(decomposition["boxes"]) == self.comm.size:
             self.decomposition = Decomposition.from_state_dict(decomposition)
-            self.ghosts = GhostExchange(self.comm, self.decomposition, self.ghost_cutoff, self.periodic_lengths)
+            self._replace_ghosts(GhostExchange(self.comm, self.decomposition, self.ghost_cutoff, self.periodic_lengths))
         else:
             self.decomposition = None
-            self.ghosts = None
+            self._replace_ghosts(None)
         totals = stored["totals"]
         self.dissipated_energy = float(totals["dissipated_energy"])
         self.elastic_energy = float(totals["elastic_energy"])
@@ -329,7 +332,8 @@ class ParticleSystem(kinds.StateComponent):
                 before = self._imbalance(costs)
                 self.decomposition = recursive_bisection(self.comm, state.positions, costs[:state.owned_count],
                                                          self.domain_lower, self.domain_upper, self.ghost_cutoff)
-                self.ghosts = GhostExchange(self.comm, self.decomposition, self.ghost_cutoff, self.periodic_lengths)
+                self._replace_ghosts(GhostExchange(self.comm, self.decomposition, self.ghost_cutoff,
+                                                   self.periodic_lengths))
                 self.rebalances += 1
                 self._pending_rebalance_log = before
             if self.comm.size > 1:
@@ -434,7 +438,14 @@ class ParticleSystem(kinds.StateComponent):
             state.reorder(permutation)
 
     # ---------------------------------------------------------------- forces
-    def _compute_forces(self) -> None:
+    def _replace_ghosts(self, ghosts) -> None:
+        if self.ghosts is not None:
+            self.ghosts.complete_sends()  # its send buffers go with it
+        self.ghosts = ghosts
+
+    def _compute_forces(self, ghosts_in_flight=None) -> None:
+        """The loads of this step.  `ghosts_in_flight`: the GhostExchange whose start_update was called; the
+        pairs with a ghost wait for its finish_update, the pairs of two owned particles and the walls do not."""
         state, tables, walls, neighbors = self.state, self.tables, self.walls, self.neighbors
         # Since the step's kick_drift only the ghost rows' loads are left to zero (one pass fewer over memory).
         first = state.owned_count if self._owned_loads_zeroed else 0
@@ -449,11 +460,12 @@ class ParticleSystem(kinds.StateComponent):
             heat_flows[:] = 0.0
         else:
             temperatures, heat_flows = NO_TEMPERATURES, NO_HEAT_FLOWS
-        elastic, dissipated, contacts, deepest_pair = self.contact_kernels.pair_forces(
-            neighbors.row_particles, neighbors.offsets, neighbors.partners, neighbors.history, state.ids, owned,
-            state.positions, state.velocities, state.angular_velocities, state.radii, state.mass,
-            state.inverse_inertia, state.material_index, tables.coefficients, tables.composition, self.dt,
-            state.forces, state.torques, temperatures, heat_flows)
+        pair_arguments = (neighbors.partners, neighbors.history, state.ids, owned, state.positions, state.velocities,
+                          state.angular_velocities, state.radii, state.mass, state.inverse_inertia,
+                          state.material_index, tables.coefficients, tables.composition, self.dt, state.forces,
+                          state.torques, temperatures, heat_flows)
+        elastic, dissipated, contacts, deepest_pair = self.contact_kernels.pair_forces(*neighbors.interior,
+                                                                                       *pair_arguments)
         if walls.count:
             wall_elastic, wall_dissipated, wall_contacts, deepest_wall = self.contact_kernels.plane_wall_forces(
                 walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities,
@@ -466,6 +478,15 @@ class ParticleSystem(kinds.StateComponent):
             contacts += wall_contacts
             if deepest_wall > self.deepest_overlaps[1]:
                 self.deepest_overlaps[1] = deepest_wall
+        if ghosts_in_flight is not None:
+            ghosts_in_flight.finish_update(state)
+        if len(neighbors.boundary[0]):
+            boundary_elastic, boundary_dissipated, boundary_contacts, deepest_boundary = \
+                self.contact_kernels.pair_forces(*neighbors.boundary, *pair_arguments)
+            elastic += boundary_elastic
+            dissipated += boundary_dissipated
+            contacts += boundary_contacts
+            deepest_pair = max(deepest_pair, deepest_boundary)
         if deepest_pair > self.deepest_overlaps[0]:
             self.deepest_overlaps[0] = deepest_pair
         for index, contributor in enumerate(self.contributors, start=walls.count):

@@ -64,8 +64,8 @@ def run(folder: Path, defer: bool, comm) -> tuple:
     compute_forces = system._compute_forces
     in_flight = [0]
 
-    def counted():  # steps whose SUM is still in flight after their force evaluation
-        compute_forces()
+    def counted(*arguments):  # steps whose SUM is still in flight after their force evaluation
+        compute_forces(*arguments)
         in_flight[0] += system.reductions.pending
     system._compute_forces = counted
     rows = []
