@@ -228,6 +228,27 @@ def _copy_of(state: ParticleState) -> ParticleState:
 # ------------------------------------------------------------------ guards
 
 
+
+def test_migration_splits_each_record_to_its_owners_destination():
+    """migrate's one-pass split of the contact records: a record whose owner leaves goes with its owner's
+    destination, every other record stays, both in their order (against numpy's search and masks)."""
+    from pdemfem.parallel.exchange import _split_records
+
+    rng = np.random.default_rng(3)
+    records = np.column_stack([rng.integers(0, 500, 4000), rng.integers(0, 500, 4000), rng.random((4000, 3))])
+    leaving_ids = np.sort(rng.choice(500, 12, replace=False))
+    leaving_destinations = rng.integers(1, 4, 12)
+    kept_records, moving_records = np.empty_like(records), np.empty_like(records)
+    moving_destinations = np.empty(len(records), dtype=np.int64)
+    kept, moving = _split_records(records, leaving_ids, leaving_destinations, kept_records, moving_records,
+                                  moving_destinations)
+    leaves = np.isin(records[:, 0].astype(np.int64), leaving_ids)
+    assert 0 < moving == np.count_nonzero(leaves) and kept == len(records) - moving
+    assert np.array_equal(kept_records[:kept], records[~leaves])
+    assert np.array_equal(moving_records[:moving], records[leaves])
+    owners = records[leaves, 0].astype(np.int64)
+    assert np.array_equal(moving_destinations[:moving], leaving_destinations[np.searchsorted(leaving_ids, owners)])
+
 def test_entry_and_state_dict_shape_are_checked(tmp_path):
     with pytest.raises(ValueError, match="unknown state entry kind"):
         kinds.Entry("rows", np.zeros(3))

@@ -13,6 +13,7 @@ import itertools
 
 import numpy as np
 from mpi4py import MPI
+from numba import njit
 
 from pdemfem.parallel.decomposition import rows_near_box
 from pdemfem.parallel.index_map import ForwardScatter, ParticleIndexMap
@@ -83,23 +84,50 @@ def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.nd
     # over every owned particle cost ~75 ms per rebuild at 100k particles and 400k records).
     leaving_ids = state.ids[leaving]
     order = np.argsort(leaving_ids)
-    sorted_ids = leaving_ids[order]
-    moving_records = np.zeros(len(records), dtype=bool)
-    record_destinations = np.zeros(0, dtype=np.int64)
-    if len(records) and len(sorted_ids):
-        owners = records[:, 0].astype(np.int64)
-        position = np.minimum(np.searchsorted(sorted_ids, owners), len(sorted_ids) - 1)
-        moving_records = sorted_ids[position] == owners
-        record_destinations = destinations[leaving][order][position[moving_records]].astype(np.int64)
+    kept_records, moving_records, record_destinations = records, records[:0], np.zeros(0, dtype=np.int64)
+    if len(records) and len(leaving):
+        # One pass splits the records into kept and moving rows, with room after the kept ones for those that
+        # arrive: numpy's search, masks and concatenation took 0.57 ms per rebuild at 21,000 records.
+        kept_records = np.empty((len(records) + len(records) // 8 + 64, records.shape[1]))
+        moving_records = np.empty_like(records)
+        record_destinations = np.empty(len(records), dtype=np.int64)
+        kept, moving = _split_records(records, leaving_ids[order], destinations[leaving][order].astype(np.int64),
+                                      kept_records, moving_records, record_destinations)
+        kept_records, moving_records, record_destinations = (kept_records, moving_records[:moving],
+                                                             record_destinations[:moving])
+    else:
+        kept = len(records)
     if len(leaving):  # most rebuilds move few particles, many none
         state.remove(leaving)
     incoming = _alltoallv_rows(comm, packed, destinations[leaving].astype(np.int64), width)
     state.append_rows(incoming, layout, as_ghosts=False)
-    any_moving = bool(moving_records.any())
-    kept_records = records[~moving_records] if any_moving else records
-    incoming_records = _alltoallv_rows(comm, records[moving_records] if any_moving else records[:0],
-                                       record_destinations, records.shape[1])
-    return np.concatenate([kept_records, incoming_records]) if len(incoming_records) else kept_records
+    incoming_records = _alltoallv_rows(comm, moving_records, record_destinations, records.shape[1])
+    arrived = len(incoming_records)
+    if kept_records is not records and kept + arrived <= len(kept_records):
+        kept_records[kept:kept + arrived] = incoming_records
+        return kept_records[:kept + arrived]
+    return np.concatenate([kept_records[:kept], incoming_records]) if arrived else kept_records[:kept]
+
+
+@njit(cache=True)
+def _split_records(records, sorted_leaving_ids, leaving_destinations, kept_records, moving_records,
+                   moving_destinations):
+    """Copy each record (owner id first) to kept_records, or, when its owner is among the leaving ids (sorted),
+    to moving_records with the owner's destination.  Returns (kept, moving) counts."""
+    kept = 0
+    moving = 0
+    last = sorted_leaving_ids.shape[0] - 1
+    for k in range(records.shape[0]):
+        owner = np.int64(records[k, 0])
+        position = min(np.searchsorted(sorted_leaving_ids, owner), last)
+        if sorted_leaving_ids[position] == owner:
+            moving_records[moving] = records[k]
+            moving_destinations[moving] = leaving_destinations[position]
+            moving += 1
+        else:
+            kept_records[kept] = records[k]
+            kept += 1
+    return kept, moving
 
 
 class GhostExchange:
