@@ -48,7 +48,8 @@ def test_a_dem_step_makes_at_most_two_collectives(kind, tmp_path):
 @pytest.mark.mpi
 def test_a_sum_left_in_flight_to_the_next_step_gives_the_same_results_bit_for_bit(tmp_path):
     """Every value read between steps that comes from the step's SUM (energies, contact count, the walls'
-    forces, torques and work, the history's mean surface forces) is identical with the SUM finished at once."""
+    forces, torques and work, the history's mean surface forces) is identical with the SUM finished at once,
+    and with the ghosts' update finished before the forces instead of overlapping the owned pairs."""
     out = tmp_path / "deferred.json"
     run_under_mpi(2, "deferred_sum_case.py", out)
     result = json.loads(out.read_text())
@@ -58,3 +59,6 @@ def test_a_sum_left_in_flight_to_the_next_step_gives_the_same_results_bit_for_bi
     assert result["deferred"] == result["finished"]
     contact_counts = [row[4] for row in result["deferred"]]
     assert max(contact_counts) > 0
+    # The ghosts' update finished before the forces: the same, bit for bit, with pairs across the cut there.
+    assert result["boundary_pairs"] > 0
+    assert result["serial_ghosts"] == result["deferred"]

@@ -1,6 +1,8 @@
 """MPI case: a step's SUM over the ranks left in flight until the next step's MAX (ParticleSystem.defer_step_sum,
 what a Simulation without solids does) gives the same results, bit for bit, as the SUM finished at once
-(tests/test_collectives.py).
+(tests/test_collectives.py).  So does the ghosts' update finished before the forces instead of while the pairs
+of two owned particles are computed: a pass that read a ghost before its update arrived (a pair misplaced by
+the list's split, a contributor) would read last step's ghost.
 
 usage: deferred_sum_case.py OUT.json
 
@@ -53,8 +55,9 @@ def readings(simulation) -> list:
     return [float(value) for value in values]
 
 
-def run(folder: Path, defer: bool, comm) -> tuple:
+def run(folder: Path, defer: bool, comm, overlap: bool = True) -> tuple:
     from pdemfem import Simulation
+    from pdemfem.parallel.exchange import GhostExchange
 
     simulation = Simulation.from_dict(scene(folder), comm=comm, base_dir=folder, output_dir=str(folder / "out"),
                                       force=True)
@@ -68,11 +71,23 @@ def run(folder: Path, defer: bool, comm) -> tuple:
         compute_forces(*arguments)
         in_flight[0] += system.reductions.pending
     system._compute_forces = counted
+    boundary_pairs = [0]
+    if not overlap:  # the whole update before the forces
+        exchange = system.ghosts
+
+        def start_and_finish(state):
+            GhostExchange.start_update(exchange, state)
+            GhostExchange.finish_update(exchange, state)
+            boundary_pairs[0] = max(boundary_pairs[0], int(sum(system.neighbors.boundary[2] -
+                                                                system.neighbors.boundary[1])))
+        exchange.start_update = start_and_finish
+        exchange.finish_update = lambda state: None
     rows = []
     for _ in range(CALLS):
         simulation.step(STEPS_PER_CALL)
         rows.append(readings(simulation))
-    return rows, in_flight[0]
+    assert system.ghosts is exchange if not overlap else True  # (no rebalance replaced the patched exchange)
+    return rows, in_flight[0], boundary_pairs[0]
 
 
 def main():
@@ -80,12 +95,14 @@ def main():
     comm = MPI.COMM_WORLD
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(comm.bcast(folder if comm.rank == 0 else None, root=0))
-        deferred, deferred_steps = run(folder, True, comm)
-        finished, finished_steps = run(folder, False, comm)
+        deferred, deferred_steps, _ = run(folder, True, comm)
+        finished, finished_steps, _ = run(folder, False, comm)
+        serial_ghosts, _, boundary_pairs = run(folder, True, comm, overlap=False)
         comm.Barrier()
     if comm.rank == 0:
         Path(out).write_text(json.dumps({"ranks": comm.size, "deferred": deferred, "finished": finished,
-                                         "steps_in_flight": [deferred_steps, finished_steps]}))
+                                         "steps_in_flight": [deferred_steps, finished_steps],
+                                         "serial_ghosts": serial_ghosts, "boundary_pairs": boundary_pairs}))
 
 
 if __name__ == "__main__":
