@@ -160,7 +160,7 @@ class GhostExchange:
     def plan_and_send(self, state) -> None:
         """Choose the ghosts to send (at a rebuild), send them in full, append those received, and
         size the per-step scatter's buffers for the new index map."""
-        self.complete_sends()
+        self.complete_messages()
         owned = state.owned_count
         positions = state.positions[:owned]
         rows = {neighbour: [] for neighbour in self.neighbours}
@@ -201,7 +201,7 @@ class GhostExchange:
         owned particles) can run before finish_update, while they travel."""
         if not self.neighbours:
             return
-        self.complete_sends()
+        self.complete_messages()
         scatter = self.step_scatter
         if scatter.registry_version != state.registry_version:  # a field was registered since the rebuild
             scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
@@ -214,8 +214,9 @@ class GhostExchange:
 
     def finish_update(self, state) -> None:
         """The second half of update: wait for the neighbours' rows and write them over the ghost rows.  The
-        sends are completed later (complete_sends: at the next update or rebuild); waiting for them here would
-        wait until every neighbour has reached its own finish_update, a rendezvous the receives do not need."""
+        sends are completed later (complete_messages: at the next update or rebuild); waiting for them here
+        would wait until every neighbour has reached its own finish_update (a large message is read by its
+        receiver), a rendezvous the receives do not need."""
         if not self.neighbours:
             return
         MPI.Request.Waitall(self._receives)
@@ -224,11 +225,13 @@ class GhostExchange:
         scatter.unpack(state, {n: scatter.send_buffers[n] if n == rank else scatter.receive_buffers[n]
                                for n in self.neighbours})
 
-    def complete_sends(self) -> None:
-        """Wait for the last update's sends (their buffers are reused, or dropped with this exchange)."""
-        if self._sends:
-            MPI.Request.Waitall(self._sends)
-            self._sends = []
+    def complete_messages(self) -> None:
+        """Wait for the last update's sends (their buffers are reused, or dropped with this exchange), and for
+        its receives if an error between start_update and finish_update left them posted (a receive left
+        pending would take the next update's rows)."""
+        if self._sends or self._receives:
+            MPI.Request.Waitall(self._receives + self._sends)
+            self._receives, self._sends = [], []
 
     def _exchange(self, outgoing: dict, width: int, tag: int, counts, receive_buffers=None) -> dict:
         """Point-to-point rows to every neighbour; `counts` None: the counts are exchanged first.

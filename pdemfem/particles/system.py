@@ -440,7 +440,7 @@ class ParticleSystem(kinds.StateComponent):
     # ---------------------------------------------------------------- forces
     def _replace_ghosts(self, ghosts) -> None:
         if self.ghosts is not None:
-            self.ghosts.complete_sends()  # its send buffers go with it
+            self.ghosts.complete_messages()  # its send buffers go with it
         self.ghosts = ghosts
 
     def _compute_forces(self, ghosts_in_flight=None) -> None:
