@@ -21,7 +21,7 @@ from pdemfem.parallel.index_map import ForwardScatter, ParticleIndexMap
 # Fixed tags are safe: the particle system talks on a private duplicate of the user's communicator
 # (pdemfem.parallel.api_safety), so no message of the user's code can match them.
 _GHOST_TAG = 71  # counts on 71, rows on 72
-_GHOST_UPDATE_TAG = 81  # rows on 82
+_GHOST_UPDATE_TAG = 81  # the per-step update's rows (counts known)
 
 
 def _alltoallv_rows(comm, rows: np.ndarray, destinations: np.ndarray, width: int) -> np.ndarray:
