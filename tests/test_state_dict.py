@@ -143,7 +143,7 @@ def test_ghost_update_carries_the_registered_step_fields():
 def test_ghost_update_allocates_no_arrays():
     state, ghosts, _ = periodic_ghosts(4000)
     ghosts.update(state)  # first call: compiles the pack/unpack kernels
-    buffer_bytes = ghosts.step_scatter.send_buffers[0].nbytes
+    buffer_bytes = sum(block.nbytes for block in ghosts.step_scatter.send_blocks[0])
     tracemalloc.start()
     ghosts.update(state)
     _, peak = tracemalloc.get_traced_memory()

@@ -192,7 +192,7 @@ class GhostExchange:
 
     def update(self, state) -> None:
         """Refresh the ghosts' `ghost_step` fields (every step between rebuilds): owned rows packed into
-        the preallocated send buffers, received into the preallocated receive buffers."""
+        the preallocated send blocks, received straight into the ghost rows."""
         self.start_update(state)
         self.finish_update(state)
 
@@ -207,10 +207,11 @@ class GhostExchange:
             scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
         scatter.pack(state)
         comm, rank = self.comm, self.comm.rank
-        self._receives = [comm.Irecv(scatter.receive_buffers[n], source=n, tag=_GHOST_UPDATE_TAG)
-                          for n in self.neighbours if n != rank]
-        self._sends = [comm.Isend(scatter.send_buffers[n], dest=n, tag=_GHOST_UPDATE_TAG)
-                       for n in self.neighbours if n != rank]
+        # Messages of one source and tag match in the order they were posted: field by field.
+        self._receives = [comm.Irecv(rows, source=n, tag=_GHOST_UPDATE_TAG)
+                          for n in self.neighbours if n != rank for rows in scatter.ghost_rows(state, n)]
+        self._sends = [comm.Isend(block, dest=n, tag=_GHOST_UPDATE_TAG)
+                       for n in self.neighbours if n != rank for block in scatter.send_blocks[n]]
 
     def finish_update(self, state) -> None:
         """The second half of update: wait for the neighbours' rows and write them over the ghost rows.  The
@@ -221,9 +222,7 @@ class GhostExchange:
             return
         MPI.Request.Waitall(self._receives)
         self._receives = []
-        scatter, rank = self.step_scatter, self.comm.rank
-        scatter.unpack(state, {n: scatter.send_buffers[n] if n == rank else scatter.receive_buffers[n]
-                               for n in self.neighbours})
+        self.step_scatter.copy_own(state, self.comm.rank)
 
     def complete_messages(self) -> None:
         """Wait for the last update's sends (their buffers are reused, or dropped with this exchange), and for

@@ -4,8 +4,8 @@
     index_map.owned_range                 # (0, owned): rows this rank integrates
     index_map.ghost_ranges[neighbour]     # [start, stop): the ghost rows `neighbour` sends
     index_map.send_rows[neighbour]        # owned rows sent to `neighbour` as its ghosts
-    scatter = ForwardScatter(index_map, state, "ghost_step")   # buffers sized once per rebuild
-    scatter.pack(state) ... MPI on scatter.send_buffers / receive_buffers ... scatter.unpack(state)
+    scatter = ForwardScatter(index_map, state, "ghost_step")   # blocks sized once per rebuild
+    scatter.pack(state) ... MPI: scatter.send_blocks[n] -> the receiver's scatter.ghost_rows(state, n)
 
 Like an index map of a finite element library (owned range, ghost range by owner, and
 a named forward scatter owner -> ghosts), but for particles: the map is rebuilt at
@@ -14,6 +14,8 @@ fields registered as `ghost_step` (pdemfem.particles.state) runs every step thro
 buffers allocated here, so the per-step ghost update allocates no arrays.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -40,62 +42,60 @@ class ParticleIndexMap:
 
 
 class ForwardScatter:
-    """Owned rows -> their ghost copies for the fields with one registry flag, through buffers
-    preallocated for the index map (one send and one receive matrix per neighbour)."""
+    """Owned rows -> their ghost copies for the fields with one registry flag.  Each field is packed into a
+    block of its own per neighbour (preallocated for the index map, in the field's dtype) and received
+    straight into its ghost rows: a row range of a C-ordered array is one contiguous piece, so nothing is
+    unpacked (one message per field and neighbour)."""
 
     def __init__(self, index_map: ParticleIndexMap, state, flag: str):
         self.index_map = index_map
         self.registry_version = state.registry_version
-        self.layout, self.width = state.layout(flag)
-        self.shifted = [state.registry[name].periodic_shift for name, *_ in self.layout]
-        self.send_buffers = {n: np.empty((len(index_map.send_rows[n]), self.width)) for n in index_map.neighbours}
-        self.receive_buffers = {n: np.empty((int(index_map.receive_counts[n]), self.width))
-                                for n in index_map.neighbours}
+        self.names = state.field_names(flag)
+        self.shifted = np.array([state.registry[name].periodic_shift for name in self.names])
+        self.send_blocks = {n: tuple(np.empty((len(index_map.send_rows[n]), *state.array(name).shape[1:]),
+                                              dtype=state.array(name).dtype) for name in self.names)
+                            for n in index_map.neighbours}
+        # (n, columns) views of the blocks, made once: what the packing kernel writes through.
+        self.send_matrices = {n: tuple(_as_matrix(block) for block in blocks) for n, blocks in self.send_blocks.items()}
 
     def pack(self, state) -> None:
-        """Copy the owned rows each neighbour receives into its send buffer (periodic shift added)."""
+        """Copy the owned rows each neighbour receives into its send blocks (periodic shift added): one kernel
+        call per neighbour for every field (ghost_step fields are float64, ParticleState refuses others)."""
+        if not self.names:
+            return
         index_map = self.index_map
+        fields = tuple(_as_matrix(state.array(name)) for name in self.names)
         for neighbour in index_map.neighbours:
-            buffer = self.send_buffers[neighbour]
-            rows = index_map.send_rows[neighbour]
-            shifts = index_map.send_shifts[neighbour]
-            for (name, start, _, _, _), shifted in zip(self.layout, self.shifted):
-                values = _as_matrix(state.array(name))
-                if shifted:
-                    _pack_shifted(values, rows, shifts, buffer, start)
-                else:
-                    _pack(values, rows, buffer, start)
+            _pack_fields(fields, self.shifted, index_map.send_rows[neighbour], index_map.send_shifts[neighbour],
+                         self.send_matrices[neighbour])
 
-    def unpack(self, state, buffers: dict) -> None:
-        """Write each neighbour's received rows over its ghost range."""
-        for neighbour in self.index_map.neighbours:
-            first, _ = self.index_map.ghost_ranges[neighbour]
-            buffer = buffers[neighbour]
-            for name, start, *_ in self.layout:
-                _unpack(buffer, start, _as_matrix(state.array(name)), first)
+    def ghost_rows(self, state, neighbour) -> list:
+        """The ghost rows `neighbour` sends, one view per field: where its blocks are received."""
+        first, stop = self.index_map.ghost_ranges[neighbour]
+        return [state.array(name)[first:stop] for name in self.names]
+
+    def copy_own(self, state, rank: int) -> None:
+        """This rank's own periodic images: its blocks copied into their ghost rows."""
+        if rank in self.send_blocks:
+            for rows, block in zip(self.ghost_rows(state, rank), self.send_blocks[rank]):
+                rows[...] = block
 
 
 def _as_matrix(values: np.ndarray) -> np.ndarray:
     """(count, columns) view of a per-particle array (no copy; (count, 3) arrays pass as they are)."""
-    return values if values.ndim == 2 else values.reshape(len(values), -1)
+    return values if values.ndim == 2 else values.reshape(len(values), math.prod(values.shape[1:]))
 
 
 @njit(cache=True)
-def _pack(values, rows, buffer, column):
+def _pack_fields(fields, shifted, rows, shifts, blocks):
     for k in range(rows.shape[0]):
-        for c in range(values.shape[1]):
-            buffer[k, column + c] = values[rows[k], c]
-
-
-@njit(cache=True)
-def _pack_shifted(values, rows, shifts, buffer, column):
-    for k in range(rows.shape[0]):
-        for c in range(values.shape[1]):
-            buffer[k, column + c] = values[rows[k], c] + shifts[k, c]
-
-
-@njit(cache=True)
-def _unpack(buffer, column, values, first):
-    for k in range(buffer.shape[0]):
-        for c in range(values.shape[1]):
-            values[first + k, c] = buffer[k, column + c]
+        row = rows[k]
+        for f in range(len(fields)):
+            values = fields[f]
+            block = blocks[f]
+            if shifted[f]:
+                for c in range(values.shape[1]):
+                    block[k, c] = values[row, c] + shifts[k, c]
+            else:
+                for c in range(values.shape[1]):
+                    block[k, c] = values[row, c]

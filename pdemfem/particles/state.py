@@ -141,7 +141,7 @@ class ParticleState(kinds.StateComponent):
                              f"shifted for periodic images) must also be sent at rebuilds (ghost_rebuild)")
         if spec.ghost_step and dtype != np.float64:
             raise ValueError(f"per-particle field '{spec.name}': ghost_step fields must be float64 (the ghost "
-                             f"update copies them through float64 buffers), got {dtype}")
+                             f"update packs them all in one float64 kernel call), got {dtype}")
         self.registry[spec.name] = spec
         self.registry_version += 1
 
