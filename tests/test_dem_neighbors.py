@@ -61,19 +61,13 @@ def test_verlet_contacts_equal_brute_force():
     assert checked_contacts > 500
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_list_build_holds_every_pair_within_the_cutoff_once(seed):
-    """The stencil's runs of cells (pdemfem/neighbors/verlet.py) against all pairs: every pair closer than
-    r_i + r_j + skin with at least one owned particle is listed exactly once, on grids of a few cells a side
-    (most particles sit in boundary cells) and with ghosts."""
+def _listed_pairs(positions, radii, skin, owned):
+    """The list build's kernel on its own: (order, offsets, partners, pair count) of particles whose first
+    `owned` are owned and the rest ghosts."""
     from pdemfem.neighbors.cells import cell_grid, cell_indices, sort_by_cell
     from pdemfem.neighbors.verlet import _FORWARD_ROWS, _fill_pairs
 
-    rng = np.random.default_rng(seed)
-    count = 1500
-    positions = rng.random((count, 3)) * rng.uniform(0.002, 0.02, 3)
-    radii = rng.uniform(0.5e-3, 1.0e-3, count)
-    skin, owned = 0.3e-3, 1000
+    count = len(positions)
     lower, size, dimensions = cell_grid(positions, 2.0 * radii.max() + skin)
     cells = cell_indices(positions, lower, size, dimensions)
     order, starts = sort_by_cell(cells, int(np.prod(dimensions)))
@@ -82,6 +76,19 @@ def test_list_build_holds_every_pair_within_the_cutoff_once(seed):
     written = _fill_pairs(np.ascontiguousarray(positions[order]), radii[order], skin, owned, order, cells[order],
                           starts, dimensions, _FORWARD_ROWS, np.zeros(count, np.int32), np.zeros((1, 1)), False,
                           offsets, partners)
+    return order, offsets, partners, written
+
+@pytest.mark.parametrize("seed", range(4))
+def test_list_build_holds_every_pair_within_the_cutoff_once(seed):
+    """The stencil's runs of cells (pdemfem/neighbors/verlet.py) against all pairs: every pair closer than
+    r_i + r_j + skin with at least one owned particle is listed exactly once, on grids of a few cells a side
+    (most particles sit in boundary cells) and with ghosts."""
+    rng = np.random.default_rng(seed)
+    count = 1500
+    positions = rng.random((count, 3)) * rng.uniform(0.002, 0.02, 3)
+    radii = rng.uniform(0.5e-3, 1.0e-3, count)
+    skin, owned = 0.3e-3, 1000
+    order, offsets, partners, written = _listed_pairs(positions, radii, skin, owned)
     listed = sorted((min(a, b), max(a, b)) for a, b in zip(np.repeat(order, np.diff(offsets)), partners[:written]))
     i, j = np.triu_indices(count, k=1)
     near = np.linalg.norm(positions[i] - positions[j], axis=1) < radii[i] + radii[j] + skin
@@ -89,26 +96,17 @@ def test_list_build_holds_every_pair_within_the_cutoff_once(seed):
     assert listed == sorted(zip(i[near].tolist(), j[near].tolist()))  # sorted lists: a pair listed twice fails
 
 
-
 def test_split_puts_each_rows_pairs_of_owned_particles_first():
     """VerletList's split at the ghosts (the interior pass runs while the ghosts' update travels): each row
     keeps its partners, the owned ones first and in their order, then the ghosts in theirs; interior_ends
     marks the border; a ghost's row is all boundary."""
-    from pdemfem.neighbors.cells import cell_grid, cell_indices, sort_by_cell
-    from pdemfem.neighbors.verlet import _FORWARD_ROWS, _fill_pairs, _owned_partners_first
+    from pdemfem.neighbors.verlet import _owned_partners_first
 
     rng = np.random.default_rng(7)
     count, owned = 1500, 1000
     positions = rng.random((count, 3)) * 0.012
     radii = rng.uniform(0.5e-3, 1.0e-3, count)
-    lower, size, dimensions = cell_grid(positions, 2.0 * radii.max() + 0.3e-3)
-    cells = cell_indices(positions, lower, size, dimensions)
-    order, starts = sort_by_cell(cells, int(np.prod(dimensions)))
-    offsets = np.empty(count + 1, dtype=np.int64)
-    partners = np.empty(100 * count, dtype=np.int32)
-    written = _fill_pairs(np.ascontiguousarray(positions[order]), radii[order], 0.3e-3, owned, order, cells[order],
-                          starts, dimensions, _FORWARD_ROWS, np.zeros(count, np.int32), np.zeros((1, 1)), False,
-                          offsets, partners)
+    order, offsets, partners, written = _listed_pairs(positions, radii, 0.3e-3, owned)
     before = partners[:written].copy()
     interior_ends = np.empty(count, dtype=np.int64)
     boundary_rows = _owned_partners_first(order, offsets, partners[:written], owned, interior_ends)

@@ -93,8 +93,7 @@ def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.nd
         record_destinations = np.empty(len(records), dtype=np.int64)
         kept, moving = _split_records(records, leaving_ids[order], destinations[leaving][order].astype(np.int64),
                                       kept_records, moving_records, record_destinations)
-        kept_records, moving_records, record_destinations = (kept_records, moving_records[:moving],
-                                                             record_destinations[:moving])
+        moving_records, record_destinations = moving_records[:moving], record_destinations[:moving]
     else:
         kept = len(records)
     if len(leaving):  # most rebuilds move few particles, many none
@@ -181,7 +180,7 @@ class GhostExchange:
                 if state.registry[name].periodic_shift:
                     packed[:, start:start + columns] += send_shifts[neighbour]
             outgoing[neighbour] = packed
-        received = self._exchange(outgoing, width, _GHOST_TAG, counts=None)
+        received = self._exchange(outgoing, width, _GHOST_TAG)
         receive_counts = {}
         for neighbour in self.neighbours:
             receive_counts[neighbour] = len(received[neighbour])
@@ -232,34 +231,27 @@ class GhostExchange:
             MPI.Request.Waitall(self._receives + self._sends)
             self._receives, self._sends = [], []
 
-    def _exchange(self, outgoing: dict, width: int, tag: int, counts, receive_buffers=None) -> dict:
-        """Point-to-point rows to every neighbour; `counts` None: the counts are exchanged first.
-        receive_buffers: where to receive (preallocated); the own rank's rows (periodic images) are
-        then read from its send buffer."""
+    def _exchange(self, outgoing: dict, width: int, tag: int) -> dict:
+        """Point-to-point rows to every neighbour, their counts first (tag, then tag + 1); the own rank's rows
+        (periodic images) are copied."""
         comm, rank = self.comm, self.comm.rank
-        if counts is None:
-            counts = {}
-            requests = []
-            count_buffers = {n: np.empty(1, dtype=np.int64) for n in self.neighbours}
-            for neighbour in self.neighbours:
-                if neighbour == rank:
-                    continue
+        requests = []
+        count_buffers = {n: np.empty(1, dtype=np.int64) for n in self.neighbours}
+        for neighbour in self.neighbours:
+            if neighbour != rank:
                 requests.append(comm.Irecv(count_buffers[neighbour], source=neighbour, tag=tag))
-            send_counts = {n: np.array([len(outgoing[n])], dtype=np.int64) for n in self.neighbours}
-            for neighbour in self.neighbours:
-                if neighbour != rank:
-                    requests.append(comm.Isend(send_counts[neighbour], dest=neighbour, tag=tag))
-            MPI.Request.Waitall(requests)
-            for neighbour in self.neighbours:
-                counts[neighbour] = len(outgoing[neighbour]) if neighbour == rank else int(count_buffers[neighbour][0])
+        send_counts = {n: np.array([len(outgoing[n])], dtype=np.int64) for n in self.neighbours}
+        for neighbour in self.neighbours:
+            if neighbour != rank:
+                requests.append(comm.Isend(send_counts[neighbour], dest=neighbour, tag=tag))
+        MPI.Request.Waitall(requests)
         received = {}
         requests = []
         for neighbour in self.neighbours:
             if neighbour == rank:
-                received[neighbour] = outgoing[neighbour] if receive_buffers is not None else outgoing[neighbour].copy()
+                received[neighbour] = outgoing[neighbour].copy()
                 continue
-            received[neighbour] = (receive_buffers[neighbour] if receive_buffers is not None
-                                   else np.empty((counts[neighbour], width)))
+            received[neighbour] = np.empty((int(count_buffers[neighbour][0]), width))
             requests.append(comm.Irecv(received[neighbour], source=neighbour, tag=tag + 1))
         for neighbour in self.neighbours:
             if neighbour != rank:
