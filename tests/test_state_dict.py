@@ -217,6 +217,42 @@ def test_remove_fills_the_holes_with_the_last_rows_and_keeps_every_field_of_each
     assert state.owned_count == state.count == 0
 
 
+def _page_offsets_apart(state: ParticleState, names) -> float:
+    """The smallest distance, in bytes around a 4 KiB page, between the page offsets of the fields' first rows."""
+    offsets = sorted(state.array(name).ctypes.data % 4096 for name in names)
+    return min((later - earlier) % 4096 for earlier, later in zip(offsets, offsets[1:] + offsets[:1]))
+
+
+def test_every_field_starts_at_a_place_of_its_own_in_a_page():
+    """Arrays walked in one loop whose addresses agree in their low 12 bits stall each other (4K aliasing);
+    malloc puts every large array at the same 16 bytes into a page.  Each field's buffer starts at its own
+    offset, through construction, an added field, reorder, ghost appends, removal and the list build's copy
+    of the positions, so the eight arrays kick_drift walks are at least 5 cache lines apart (the golden-ratio
+    sequence over 64 lines: 320 B for the core fields)."""
+    from pdemfem.particles.state import page_offset, staggered_empty
+
+    for shape, dtype, slot in (((0, 3), np.float64, 3), ((7,), np.int32, 5), ((1000, 2), np.float64, 40)):
+        array = staggered_empty(shape, dtype, slot)
+        assert array.shape == shape and array.dtype == dtype and array.flags.c_contiguous
+        assert array.ctypes.data % 4096 == page_offset(slot) or array.size == 0
+    walked = ("positions", "velocities", "angular_velocities", "forces", "torques", "positions_at_build",
+              "inverse_mass", "inverse_inertia")
+    state = particles(30000)  # rows of 240 kB: malloc maps each array on its own page, 16 B in
+    state.add_field("extra", (3,))
+    layout, width = state.ghost_layout()
+    steps = [lambda: None, lambda: state.reorder(np.random.default_rng(1).permutation(state.owned_count)),
+             lambda: state.append_rows(state.pack_rows(np.arange(500), layout, width), layout, as_ghosts=True),
+             state.record_build_positions, state.drop_ghosts, lambda: state.remove(np.arange(0, 3000, 7))]
+    for step in steps:
+        step()
+        offsets = [state.array(name).ctypes.data % 4096 for name in state.registry]
+        assert len(set(offsets)) == len(offsets), offsets
+        assert _page_offsets_apart(state, walked) >= 320
+        if step is state.record_build_positions:
+            assert np.array_equal(state.positions_at_build, state.positions)
+            assert not np.shares_memory(state.positions_at_build, state.positions)
+
+
 def _copy_of(state: ParticleState) -> ParticleState:
     """The same rows in arrays of their own (no spare rows)."""
     for name in state.registry:

@@ -352,7 +352,7 @@ class ParticleSystem(kinds.StateComponent):
         self.walls.build_candidates(state.positions[:state.owned_count], state.radii[:state.owned_count],
                                     self.skin + self.tables.cohesion_reach, len(self.neighbors.history_signs))
         self.walls.restore_history(state.ids, state.owned_count, records)
-        state.positions_at_build = state.positions.copy()
+        state.record_build_positions()
         if self.clumps is not None:
             self.clumps.refresh_rows(state)
         if getattr(self, "_pending_rebalance_log", None) is not None and self.comm.size > 1:
