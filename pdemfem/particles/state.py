@@ -51,10 +51,10 @@ class FieldSpec:
 
 # Where in a 4 KiB page each field's buffer starts.  Arrays read and written in one loop (kick_drift: eight
 # of them) whose addresses agree in their low 12 bits make the core take a load for a possibly pending store
-# ("4K aliasing") and crowd the same L1 sets: malloc's placement decided this per run and per rank, and the
-# same kick_drift took 54 us on one rank and 89 us on the other at 14,000 particles (0.97 against 1.47 of the
-# staggered time in a micro-benchmark with every array at one offset).  Field k starts at the k-th point of
-# the golden-ratio sequence over the page's 64 cache lines: any first n fields lie well apart.
+# ("4K aliasing") and crowd the same L1 sets.  malloc starts every array above 128 kB 16 bytes into a page, and
+# later in a run at offsets that collide by chance: the same kick_drift took 54 us on one rank and 87 us on the
+# other at 14,000 particles, and 1.17-1.47x the staggered time with every array at one offset.  Field k starts
+# at the k-th point of the golden-ratio sequence over the page's 64 cache lines: any first n fields lie apart.
 _PAGE_BYTES = 4096
 _LINE_BYTES = 64
 _GOLDEN_FRACTION = 0.6180339887498949
