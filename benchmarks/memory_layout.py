@@ -25,11 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from pdemfem.particles.integrate import kick_drift
-from pdemfem.particles.state import CORE_FIELDS, staggered_empty
+from pdemfem.particles.state import CORE_FIELD_SLOTS, staggered_empty
 
 WALKED = ("positions", "velocities", "angular_velocities", "forces", "torques", "positions_at_build",
           "inverse_mass", "inverse_inertia")
-SLOTS = {spec.name: slot for slot, spec in enumerate(CORE_FIELDS)}
 
 
 def _arrays(count: int, allocate) -> dict:
@@ -37,7 +36,7 @@ def _arrays(count: int, allocate) -> dict:
     arrays = {}
     for name in WALKED:
         shape = (count,) if name.startswith("inverse") else (count, 3)
-        arrays[name] = allocate(shape, SLOTS[name])
+        arrays[name] = allocate(shape, CORE_FIELD_SLOTS[name])
         arrays[name][...] = rng.random(shape)
     return arrays
 

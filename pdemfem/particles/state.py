@@ -104,6 +104,8 @@ CORE_FIELDS = (
 # the conductances [W/K] of each row's contacts are recomputed every step.  Without heat neither exists.
 TEMPERATURE_FIELD = FieldSpec("temperatures", ghost_rebuild=True, ghost_step=True)
 HEAT_FLOW_FIELD = FieldSpec("heat_flows", migrate=False, checkpoint=False)
+# Each core field's slot in the page-offset sequence (page_offset); fields added later take the next ones.
+CORE_FIELD_SLOTS = {spec.name: slot for slot, spec in enumerate(CORE_FIELDS)}
 # Fields that define a particle and move with it between ranks.
 MIGRATING_FIELDS = tuple(spec.name for spec in CORE_FIELDS if spec.migrate)
 
@@ -128,7 +130,7 @@ class ParticleState(kinds.StateComponent):
         self.torques = np.zeros((count, 3))
         self.positions_at_build = self.positions.copy()
         self.registry = {spec.name: spec for spec in CORE_FIELDS}
-        self._slots = {spec.name: slot for slot, spec in enumerate(CORE_FIELDS)}  # page_offset's, never reused
+        self._slots = dict(CORE_FIELD_SLOTS)  # page_offset's slot of every field ever registered, never reused
         self.registry_version = 0  # bumped when a field is added or removed (the ghost scatter re-plans)
         self.fields = {}  # the arrays of the fields registered with add_field
         # name -> the buffer an array is the leading rows of, with spare rows for the next append
@@ -337,9 +339,8 @@ class ParticleState(kinds.StateComponent):
         count = len(packed)
         if count == 0:
             return  # nothing arrived: keep the arrays as they are
-        given = set()
+        given = {name for name, *_ in layout}
         for name, start, columns, tail, dtype in layout:
-            given.add(name)
             new_rows = self._grow(name, count)
             if dtype in _KERNEL_DTYPES:
                 _scatter_columns(packed, start, new_rows.reshape(count, columns), dtype != np.float64)
