@@ -188,7 +188,7 @@ def _is_option(text: str) -> bool:
 
 def _set_petsc_options(options) -> None:
     """Put -fem_* options (the FE solvers' prefixes: -fem_static_*, -fem_mass_*) into PETSc's database."""
-    from petsc4py import PETSc
+    from pdemfem.fem.petsc import PETSc
 
     database = PETSc.Options()
     for name, value in options:
@@ -537,7 +537,7 @@ def info_lines(comm) -> tuple:
 
     def petsc_version():
         import petsc4py
-        from petsc4py import PETSc
+        from pdemfem.fem.petsc import PETSc
 
         major, minor, patch = PETSc.Sys.getVersion()
         return f"{major}.{minor}.{patch} (petsc4py {petsc4py.__version__}, PETSC_DIR={os.environ.get('PETSC_DIR', '')})"

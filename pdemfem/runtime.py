@@ -101,20 +101,44 @@ def process_environment(base: dict | None = None) -> dict:
 
 
 # glibc's malloc serves a block above this size with its own mapping, given back to the system when freed.
-MALLOC_MMAP_THRESHOLD_BYTES = 1 << 20
-_M_MMAP_THRESHOLD = -3  # mallopt's parameter number (malloc.h)
+MALLOC_MMAP_THRESHOLD_BYTES = 1 << 19
+# Free memory at the top of the heap is given back above this much (glibc's own largest dynamic value is twice
+# its largest mmap threshold, 64 MiB); at 2 MiB a settle run's rebuilds page-faulted 500 times each
+# (82,000 faults in 165 rebuilds against 3,000) and took 16 % longer.
+MALLOC_TRIM_THRESHOLD_BYTES = 32 << 20
+GLIBC_DEFAULT_MMAP_MAX = 65536  # how many blocks may be mapped at once (glibc's default)
+# mallopt's parameter numbers (malloc.h), each with the environment variable by which a user sets it.
+_MALLOC_PARAMETERS = (("M_MMAP_MAX", -4, "MALLOC_MMAP_MAX_"),
+                      ("M_MMAP_THRESHOLD", -3, "MALLOC_MMAP_THRESHOLD_"),
+                      ("M_TRIM_THRESHOLD", -1, "MALLOC_TRIM_THRESHOLD_"))
 
 
-def fix_malloc_mmap_threshold() -> bool:
-    """Keep blocks of a megabyte and more out of the heap (glibc).  A list rebuild allocates and frees
+def malloc_settings() -> dict:
+    """The values fix_malloc gives glibc's malloc, by mallopt parameter name."""
+    return {"M_MMAP_MAX": GLIBC_DEFAULT_MMAP_MAX, "M_MMAP_THRESHOLD": MALLOC_MMAP_THRESHOLD_BYTES,
+            "M_TRIM_THRESHOLD": MALLOC_TRIM_THRESHOLD_BYTES}
+
+
+def fix_malloc() -> bool:
+    """Keep blocks of half a megabyte and more out of the heap (glibc).  A list rebuild allocates and frees
     several such arrays (the contact records, their look-up tables, a re-sort's per-particle arrays);
     glibc by default raises its mmap threshold to the largest block freed so far, after which they are
-    carved from the heap, whose freed fragments stay resident.  On the settle benchmark's first 3000
-    steps (115 rebuilds) the resident set rose by 967 B per particle by default and 596 B with this
-    threshold, rebuilds taking the same CPU time (0.59 s); a 128 KiB threshold gave 457 B but nearly
-    doubled the rebuilds' time (page faults on every smaller array too).  A MALLOC_MMAP_THRESHOLD_ set
-    by the user wins.  Returns whether the threshold was set."""
-    if os.environ.get("MALLOC_MMAP_THRESHOLD_") or not sys.platform.startswith("linux"):
+    carved from the heap, whose freed fragments stay resident.
+
+    Called at import and again once PETSc is loaded (pdemfem.fem.petsc): Debian's PETSc links
+    SuperLU_DIST, whose library constructor turns mapped blocks off (M_MMAP_MAX = 0) and the heap's
+    trimming off for the whole process, so every block, however large, came from the heap.  Resident
+    set rise over the settle benchmark's first 8000 steps (28,000 particles), B per particle:
+    1,110-1,355 with SuperLU_DIST's settings, 924-1,067 with a 1 MiB threshold, 829-903 with 512 KiB
+    (rebuilds' time within the noise: 30,000 more page faults in 8000 steps, ~0.1 s of 32 s).  A
+    smaller threshold costs time (every smaller array page-faults afresh at each rebuild: ~4 us a
+    page on this machine): at 256 KiB the rebuilds took ~1.15x the CPU time, at 128 KiB 1.7x.  The
+    same holds for any threshold once a per-particle array outgrows it (a 3-vector at 21,846 particles a
+    rank, one float64 at 65,536): a rebuild's fresh arrays then page-fault, the price of giving their
+    memory back.  A
+    variable set by the user (MALLOC_MMAP_THRESHOLD_, MALLOC_MMAP_MAX_, MALLOC_TRIM_THRESHOLD_) wins.
+    Returns whether the settings were made."""
+    if not sys.platform.startswith("linux"):
         return False
     try:
         import ctypes
@@ -122,12 +146,17 @@ def fix_malloc_mmap_threshold() -> bool:
         mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):  # not glibc (musl has no mallopt)
         return False
-    return bool(mallopt(_M_MMAP_THRESHOLD, MALLOC_MMAP_THRESHOLD_BYTES))
+    values = malloc_settings()
+    made = True
+    for name, number, variable in _MALLOC_PARAMETERS:
+        if not os.environ.get(variable):
+            made = bool(mallopt(number, values[name])) and made
+    return made
 
 
 def apply_to_this_process() -> None:
     """Set the variables in os.environ before petsc4py / mpi4py are imported (and fix malloc's
-    mmap threshold: fix_malloc_mmap_threshold).
+    mmap threshold: fix_malloc).
 
     Debian's petsc4py is put on sys.path by a .pth file that reads PETSC_DIR when
     the interpreter starts; when PETSC_DIR was not set then, add the path here.
@@ -135,7 +164,7 @@ def apply_to_this_process() -> None:
     for key, value in process_environment().items():
         if os.environ.get(key) != value:
             os.environ[key] = value
-    fix_malloc_mmap_threshold()
+    fix_malloc()
     petsc_dir = os.environ.get("PETSC_DIR")
     if petsc_dir:
         petsc_python_path = os.path.join(petsc_dir, "lib", "python3", "dist-packages")

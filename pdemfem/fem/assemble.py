@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from petsc4py import PETSc
+from pdemfem.fem.petsc import PETSc
 
 from pdemfem.fem.elements import ReferenceElement
 from pdemfem.fem.kernels import assemble_owned_rows

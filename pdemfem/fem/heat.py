@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 from mpi4py import MPI
-from petsc4py import PETSc
+from pdemfem.fem.petsc import PETSc
 
 from pdemfem import state_dict as kinds
 from pdemfem.errors import SolverError

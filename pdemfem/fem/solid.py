@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
-from petsc4py import PETSc
+from pdemfem.fem.petsc import PETSc
 
 from pdemfem import state_dict as kinds
 from pdemfem.errors import MeshError, SceneError, SolverError

@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from petsc4py import PETSc
+from pdemfem.fem.petsc import PETSc
 
 from pdemfem.errors import SolverError
 

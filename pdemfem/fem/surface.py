@@ -16,7 +16,7 @@ share of the surface (docs/parallel.md, "The FE side and the coupled step").
 from __future__ import annotations
 
 import numpy as np
-from petsc4py import PETSc
+from pdemfem.fem.petsc import PETSc
 
 from pdemfem.fem.elements import split_p2_faces
 
