@@ -160,9 +160,14 @@ endsolid lid
 def add_moving_walls(scene: dict, out_dir) -> dict:
     """A spinning drum (cylinder) round the grains and a spinning mesh lid pressed down onto them
     (writes lid.stl into out_dir, which must exist)."""
+    import os
     from pathlib import Path
 
-    (Path(out_dir) / "lid.stl").write_text(LID_STL)
+    # Every rank builds the scene: each writes its own file and renames it into place, so a rank reading the
+    # lid never meets another's half-written (truncated) copy.
+    own_copy = Path(out_dir) / f"lid.stl.{os.getpid()}"
+    own_copy.write_text(LID_STL)
+    os.replace(own_copy, Path(out_dir) / "lid.stl")
     scene["walls"] += [
         {"name": "drum", "kind": "cylinder", "material": "grain", "radius": 0.0585,
          "axis": {"point": [0.1, 0.1, 0.0], "direction": [0, 0, 1]}, "angular_velocity": [0, 0, 20.0]},
