@@ -144,6 +144,7 @@ class VerletList:
         self._partner_buffer = np.zeros(0, dtype=np.int32)
         self._history_buffer = np.zeros((0, len(self.history_signs)))
         self._record_buffer = np.zeros((0, RECORD_KEYS + len(self.history_signs)))
+        self._sorted_positions = np.zeros((0, 3))
         self._clear()
 
     def _clear(self):
@@ -183,7 +184,13 @@ class VerletList:
         offsets = np.empty(count + 1, dtype=np.int64)
         sorted_materials = (state.material_index[order] if self.cohesion_reach.shape[0] > 1
                             else np.zeros(count, np.int32))
-        arguments = (np.ascontiguousarray(state.positions[order]), state.radii[order], skin, state.owned_count,
+        # The sorted positions into a buffer kept from build to build (a fresh 3-vector per particle is
+        # mapped afresh by malloc and page-faulted at every rebuild, pdemfem.runtime.fix_malloc).
+        if len(self._sorted_positions) < count:
+            self._sorted_positions = np.empty((int(1.25 * count) + 64, 3))
+        sorted_positions = self._sorted_positions[:count]
+        np.take(state.positions, order, axis=0, out=sorted_positions)
+        arguments = (sorted_positions, state.radii[order], skin, state.owned_count,
                      order, sorted_cells, starts, dimensions, _FORWARD_ROWS, sorted_materials,
                      self.cohesion_reach, self.largest_reach > 0.0, offsets)
         # The partners and the history are the leading rows of buffers kept from build to build: megabyte
