@@ -135,7 +135,8 @@ def fix_malloc() -> bool:
     page on this machine): at 256 KiB the rebuilds took ~1.15x the CPU time, at 128 KiB 1.7x.  The
     same holds for any threshold once a per-particle array outgrows it (a 3-vector at 21,846 particles a
     rank, one float64 at 65,536): a rebuild's fresh arrays then page-fault, the price of giving their
-    memory back.  A
+    memory back; the arrays a rebuild would make anew every time are kept buffers instead
+    (ParticleState.reorder's scratch, the list build's sorted positions).  A
     variable set by the user (MALLOC_MMAP_THRESHOLD_, MALLOC_MMAP_MAX_, MALLOC_TRIM_THRESHOLD_) wins.
     Returns whether the settings were made."""
     if not sys.platform.startswith("linux"):
