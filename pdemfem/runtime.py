@@ -107,16 +107,10 @@ MALLOC_MMAP_THRESHOLD_BYTES = 1 << 19
 # (82,000 faults in 165 rebuilds against 3,000) and took 16 % longer.
 MALLOC_TRIM_THRESHOLD_BYTES = 32 << 20
 GLIBC_DEFAULT_MMAP_MAX = 65536  # how many blocks may be mapped at once (glibc's default)
-# mallopt's parameter numbers (malloc.h), each with the environment variable by which a user sets it.
-_MALLOC_PARAMETERS = (("M_MMAP_MAX", -4, "MALLOC_MMAP_MAX_"),
-                      ("M_MMAP_THRESHOLD", -3, "MALLOC_MMAP_THRESHOLD_"),
-                      ("M_TRIM_THRESHOLD", -1, "MALLOC_TRIM_THRESHOLD_"))
-
-
-def malloc_settings() -> dict:
-    """The values fix_malloc gives glibc's malloc, by mallopt parameter name."""
-    return {"M_MMAP_MAX": GLIBC_DEFAULT_MMAP_MAX, "M_MMAP_THRESHOLD": MALLOC_MMAP_THRESHOLD_BYTES,
-            "M_TRIM_THRESHOLD": MALLOC_TRIM_THRESHOLD_BYTES}
+# (mallopt's parameter number (malloc.h), the environment variable by which a user sets it, pdemfem's value)
+_MALLOC_SETTINGS = ((-4, "MALLOC_MMAP_MAX_", GLIBC_DEFAULT_MMAP_MAX),
+                    (-3, "MALLOC_MMAP_THRESHOLD_", MALLOC_MMAP_THRESHOLD_BYTES),
+                    (-1, "MALLOC_TRIM_THRESHOLD_", MALLOC_TRIM_THRESHOLD_BYTES))
 
 
 def fix_malloc() -> bool:
@@ -147,17 +141,16 @@ def fix_malloc() -> bool:
         mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):  # not glibc (musl has no mallopt)
         return False
-    values = malloc_settings()
     made = True
-    for name, number, variable in _MALLOC_PARAMETERS:
+    for number, variable, value in _MALLOC_SETTINGS:
         if not os.environ.get(variable):
-            made = bool(mallopt(number, values[name])) and made
+            made = bool(mallopt(number, value)) and made
     return made
 
 
 def apply_to_this_process() -> None:
-    """Set the variables in os.environ before petsc4py / mpi4py are imported (and fix malloc's
-    mmap threshold: fix_malloc).
+    """Set the variables in os.environ before petsc4py / mpi4py are imported (and make pdemfem's
+    malloc settings: fix_malloc).
 
     Debian's petsc4py is put on sys.path by a .pth file that reads PETSC_DIR when
     the interpreter starts; when PETSC_DIR was not set then, add the path here.

@@ -186,7 +186,7 @@ class VerletList:
                             else np.zeros(count, np.int32))
         # The sorted positions into a buffer kept from build to build (a fresh 3-vector per particle is
         # mapped afresh by malloc and page-faulted at every rebuild, pdemfem.runtime.fix_malloc).
-        if len(self._sorted_positions) < count:
+        if not count <= len(self._sorted_positions) <= _LARGEST_BUFFER_SLACK * count + 64:
             self._sorted_positions = np.empty((int(1.25 * count) + 64, 3))
         sorted_positions = self._sorted_positions[:count]
         np.take(state.positions, order, axis=0, out=sorted_positions)
