@@ -176,6 +176,14 @@ class GhostExchange:
         self._receives = []
         self._sends = []
 
+    def sent_rows_mask(self, positions: np.ndarray) -> np.ndarray:
+        """Which of these owned positions plan_and_send would send as a ghost to some neighbour (the same
+        selection): the particles with pairs across a cut."""
+        sent = np.zeros(len(positions), dtype=bool)
+        for _, shift, lower, upper in self.targets:
+            sent[rows_near_box(positions, np.asarray(shift, dtype=np.float64), lower, upper, self.cutoff)] = True
+        return sent
+
     def plan_and_send(self, state) -> None:
         """Choose the ghosts to send (at a rebuild), send them in full, append those received, and
         size the per-step scatter's buffers for the new index map."""

@@ -88,14 +88,30 @@ def _as_matrix(values: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _pack_fields(fields, shifted, rows, shifts, blocks):
-    for k in range(rows.shape[0]):
-        row = rows[k]
-        for f in range(len(fields)):
-            values = fields[f]
-            block = blocks[f]
-            if shifted[f]:
+    # Field by field, with 3-vectors' columns written out: the row-major loop over fields and columns of
+    # unknown width took 21 us for 1,500 rows of three 3-vectors, this 14 us.
+    for f in range(len(fields)):
+        values = fields[f]
+        block = blocks[f]
+        if values.shape[1] == 3 and shifted[f]:
+            for k in range(rows.shape[0]):
+                row = rows[k]
+                block[k, 0] = values[row, 0] + shifts[k, 0]
+                block[k, 1] = values[row, 1] + shifts[k, 1]
+                block[k, 2] = values[row, 2] + shifts[k, 2]
+        elif values.shape[1] == 3:
+            for k in range(rows.shape[0]):
+                row = rows[k]
+                block[k, 0] = values[row, 0]
+                block[k, 1] = values[row, 1]
+                block[k, 2] = values[row, 2]
+        elif shifted[f]:
+            for k in range(rows.shape[0]):
+                row = rows[k]
                 for c in range(values.shape[1]):
                     block[k, c] = values[row, c] + shifts[k, c]
-            else:
+        else:
+            for k in range(rows.shape[0]):
+                row = rows[k]
                 for c in range(values.shape[1]):
                     block[k, c] = values[row, c]

@@ -431,10 +431,24 @@ class ParticleSystem(kinds.StateComponent):
         if state.owned_count < 2:
             return
         lower, size, dimensions = cell_grid(state.positions, 2.0 * self.largest_radius + self.skin)
-        permutation, _ = sort_by_cell(cell_indices(state.positions, lower, size, dimensions), int(np.prod(dimensions)))
+        cells = cell_indices(state.positions, lower, size, dimensions)
+        cell_count = int(np.prod(dimensions))
+        misplaced_sent = sent_count = 0
+        if self.ghosts is not None and self.ghosts.targets:
+            # The particles sent as ghosts go last, in cell order among themselves: the pass over the pairs
+            # with a ghost (after the ghosts' update arrived) and the update's packing then read one compact
+            # block, where after the interior pass they were spread over every row of cells of an upright
+            # cut and missed the caches.
+            sent = self.ghosts.sent_rows_mask(state.positions[:state.owned_count])
+            sent_count = int(np.count_nonzero(sent))
+            misplaced_sent = sent_count - int(np.count_nonzero(sent[state.owned_count - sent_count:]))
+            cells += cell_count * sent
+            cell_count *= 2
+        permutation, _ = sort_by_cell(cells, cell_count)
         # The sort only buys memory locality (the list build bins by cell itself): skip the copy of
-        # every per-particle array while few rows break the cell order.
-        if out_of_order_runs(permutation) > REORDER_FRACTION * state.owned_count:
+        # every per-particle array while few rows break the cell order and few sent ones are out of their block.
+        if (out_of_order_runs(permutation) > REORDER_FRACTION * state.owned_count
+                or misplaced_sent > REORDER_FRACTION * sent_count):
             state.reorder(permutation)
 
     # ---------------------------------------------------------------- forces
