@@ -69,11 +69,27 @@ def allgather_rows(comm, rows: np.ndarray, width: int) -> np.ndarray:
     return gathered.reshape(-1, width)
 
 
-def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.ndarray:
+class KeptRows:
+    """A float64 row buffer kept from call to call: a fresh megabyte array at every rebuild is mapped afresh by
+    malloc and page-faulted as it is written (pdemfem.runtime.fix_malloc)."""
+
+    SLACK = 4  # given back when more than this many times what is needed
+
+    def __init__(self):
+        self.rows = np.zeros((0, 0))
+
+    def at_least(self, count: int, width: int) -> np.ndarray:
+        if self.rows.shape[1] != width or not count <= len(self.rows) <= self.SLACK * count + 1024:
+            self.rows = np.empty((int(1.25 * count) + 1024, width))
+        return self.rows
+
+
+def migrate(comm, state, destinations: np.ndarray, records: np.ndarray, kept_rows: KeptRows | None = None) -> np.ndarray:
     """Send owned particles (ghosts already dropped) to their destination ranks.
 
     `records` are contact-history rows (owner id, partner id, xi_x, xi_y, xi_z)
-    of owned particles; they travel with their owner.  Returns this rank's records.
+    of owned particles; they travel with their owner.  Returns this rank's records (in `kept_rows`' buffer
+    when given and large enough: valid until its next use).
     """
     rank = comm.rank
     layout, width = state.migrating_layout()
@@ -88,7 +104,9 @@ def migrate(comm, state, destinations: np.ndarray, records: np.ndarray) -> np.nd
     if len(records) and len(leaving):
         # One pass splits the records into kept and moving rows, with room after the kept ones for those that
         # arrive: numpy's search, masks and concatenation took 0.57 ms per rebuild at 21,000 records.
-        kept_records = np.empty((len(records) + len(records) // 8 + 64, records.shape[1]))
+        room = len(records) + len(records) // 8 + 64
+        kept_records = (np.empty((room, records.shape[1])) if kept_rows is None
+                        else kept_rows.at_least(room, records.shape[1]))
         moving_records = np.empty_like(records)
         record_destinations = np.empty(len(records), dtype=np.int64)
         kept, moving = _split_records(records, leaving_ids[order], destinations[leaving][order].astype(np.int64),
@@ -175,6 +193,10 @@ class GhostExchange:
         self.step_scatter = None
         self._receives = []
         self._sends = []
+        # The per-step update's messages as persistent requests on the scatter's blocks and the ghost rows, made
+        # once per rebuild and started every step (posting six messages afresh cost 10-17 us a step on 2 ranks).
+        self._update_receives = []
+        self._update_sends = []
 
     def sent_rows_mask(self, positions: np.ndarray) -> np.ndarray:
         """Which of these owned positions plan_and_send would send as a ghost to some neighbour (the same
@@ -188,6 +210,7 @@ class GhostExchange:
         """Choose the ghosts to send (at a rebuild), send them in full, append those received, and
         size the per-step scatter's buffers for the new index map."""
         self.complete_messages()
+        self._free_update_requests()
         owned = state.owned_count
         positions = state.positions[:owned]
         rows = {neighbour: [] for neighbour in self.neighbours}
@@ -215,7 +238,24 @@ class GhostExchange:
             if len(received[neighbour]):
                 state.append_rows(received[neighbour], layout, as_ghosts=True)
         self.index_map = ParticleIndexMap(owned, self.neighbours, send_rows, send_shifts, receive_counts)
-        self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
+        self._make_step_scatter(state)
+
+    def _make_step_scatter(self, state) -> None:
+        """The per-step scatter for the current index map and state arrays, and its persistent requests."""
+        self._free_update_requests()
+        scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
+        comm, rank = self.comm, self.comm.rank
+        # Messages of one source and tag match in the order they were posted: field by field.
+        self._update_receives = [comm.Recv_init(rows, source=n, tag=_GHOST_UPDATE_TAG)
+                                 for n in self.neighbours if n != rank for rows in scatter.ghost_rows(state, n)]
+        self._update_sends = [comm.Send_init(block, dest=n, tag=_GHOST_UPDATE_TAG)
+                              for n in self.neighbours if n != rank for block in scatter.send_blocks[n]]
+
+    def _free_update_requests(self) -> None:
+        """Free the persistent requests (inactive: complete_messages ran before)."""
+        for request in self._update_receives + self._update_sends:
+            request.Free()
+        self._update_receives, self._update_sends = [], []
 
     def update(self, state) -> None:
         """Refresh the ghosts' `ghost_step` fields (every step between rebuilds): owned rows packed into
@@ -229,16 +269,15 @@ class GhostExchange:
         if not self.neighbours:
             return
         self.complete_messages()
-        scatter = self.step_scatter
-        if scatter.registry_version != state.registry_version:  # a field was registered since the rebuild
-            scatter = self.step_scatter = ForwardScatter(self.index_map, state, "ghost_step")
-        scatter.pack(state)
-        comm, rank = self.comm, self.comm.rank
-        # Messages of one source and tag match in the order they were posted: field by field.
-        self._receives = [comm.Irecv(rows, source=n, tag=_GHOST_UPDATE_TAG)
-                          for n in self.neighbours if n != rank for rows in scatter.ghost_rows(state, n)]
-        self._sends = [comm.Isend(block, dest=n, tag=_GHOST_UPDATE_TAG)
-                       for n in self.neighbours if n != rank for block in scatter.send_blocks[n]]
+        if not self.step_scatter.bound_to(state):  # a field was registered (or an array replaced) since the rebuild
+            self._make_step_scatter(state)
+        self.step_scatter.pack(state)
+        # Receives first, then sends, as the requests were made.
+        if self._update_receives:
+            MPI.Prequest.Startall(self._update_receives)
+            MPI.Prequest.Startall(self._update_sends)
+        self._receives = self._update_receives
+        self._sends = self._update_sends
 
     def finish_update(self, state) -> None:
         """The second half of update: wait for the neighbours' rows and write them over the ghost rows.  The
@@ -250,6 +289,11 @@ class GhostExchange:
         MPI.Request.Waitall(self._receives)
         self._receives = []
         self.step_scatter.copy_own(state, self.comm.rank)
+
+    def close(self) -> None:
+        """Complete the messages in flight and free the persistent requests (the exchange is being replaced)."""
+        self.complete_messages()
+        self._free_update_requests()
 
     def complete_messages(self) -> None:
         """Wait for the last update's sends (their buffers are reused, or dropped with this exchange), and for

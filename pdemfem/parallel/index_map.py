@@ -55,8 +55,20 @@ class ForwardScatter:
         self.send_blocks = {n: tuple(np.empty((len(index_map.send_rows[n]), *state.array(name).shape[1:]),
                                               dtype=state.array(name).dtype) for name in self.names)
                             for n in index_map.neighbours}
-        # (n, columns) views of the blocks, made once: what the packing kernel writes through.
+        # (n, columns) views of the blocks and of the fields, made once: what the packing kernel reads and writes.
         self.send_matrices = {n: tuple(_as_matrix(block) for block in blocks) for n, blocks in self.send_blocks.items()}
+        self.sources = tuple(state.array(name) for name in self.names)
+        self.source_matrices = tuple(_as_matrix(values) for values in self.sources)
+
+    def bound_to(self, state) -> bool:
+        """Whether the state still holds the arrays this scatter was made for (no field registered since, none
+        replaced): its views, and messages posted on them, are then still the state's rows."""
+        if self.registry_version != state.registry_version:
+            return False
+        for name, values in zip(self.names, self.sources):
+            if state.array(name) is not values:
+                return False
+        return True
 
     def pack(self, state) -> None:
         """Copy the owned rows each neighbour receives into its send blocks (periodic shift added): one kernel
@@ -64,10 +76,9 @@ class ForwardScatter:
         if not self.names:
             return
         index_map = self.index_map
-        fields = tuple(_as_matrix(state.array(name)) for name in self.names)
         for neighbour in index_map.neighbours:
-            _pack_fields(fields, self.shifted, index_map.send_rows[neighbour], index_map.send_shifts[neighbour],
-                         self.send_matrices[neighbour])
+            _pack_fields(self.source_matrices, self.shifted, index_map.send_rows[neighbour],
+                         index_map.send_shifts[neighbour], self.send_matrices[neighbour])
 
     def ghost_rows(self, state, neighbour) -> list:
         """The ghost rows `neighbour` sends, one view per field: where its blocks are received."""

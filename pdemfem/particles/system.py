@@ -45,7 +45,7 @@ from pdemfem.contact.registry import history_signs
 from pdemfem.neighbors.cells import cell_grid, cell_indices, out_of_order_runs, sort_by_cell
 from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import Decomposition, add_pair_costs, recursive_bisection
-from pdemfem.parallel.exchange import GhostExchange, migrate
+from pdemfem.parallel.exchange import GhostExchange, KeptRows, migrate
 from pdemfem.parallel.reductions import StepReductions
 from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
 from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES, HeatLedger, heat_content, update_temperatures
@@ -128,6 +128,7 @@ class ParticleSystem(kinds.StateComponent):
         self.rebalances = 0
         self._owned_loads_zeroed = False  # set by step() between its kick_drift and the force evaluation
         self.reductions = StepReductions()  # the step's two collectives: one MAX, one SUM
+        self._migrated_records = KeptRows()  # where migrate writes the records kept and arrived
         # Leave the step's SUM in flight until the next step's MAX (finish_step_sum): set by the Simulation
         # when nothing reads the summed values within its steps; until finished, the energies, the contact
         # count, the plane walls' forces and the contributors' totals hold the step before's sums.
@@ -340,7 +341,7 @@ class ParticleSystem(kinds.StateComponent):
                 destinations = self.decomposition.owners(state.positions)
                 if self.clumps is not None:  # members go with their bodies, whole bodies move
                     destinations = self.clumps.member_destinations(state, destinations, self.decomposition)
-                records = migrate(self.comm, state, destinations, records)
+                records = migrate(self.comm, state, destinations, records, self._migrated_records)
                 if self.clumps is not None:
                     self.clumps.migrate_bodies(self.comm, self.decomposition)
         if canonical and state.owned_count:
@@ -454,7 +455,7 @@ class ParticleSystem(kinds.StateComponent):
     # ---------------------------------------------------------------- forces
     def _replace_ghosts(self, ghosts) -> None:
         if self.ghosts is not None:
-            self.ghosts.complete_messages()  # its send buffers go with it
+            self.ghosts.close()  # its send buffers and requests go with it
         self.ghosts = ghosts
 
     def _compute_forces(self, ghosts_in_flight=None) -> None:

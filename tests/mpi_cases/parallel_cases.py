@@ -305,11 +305,11 @@ def run_slide(comm, out, drop_history, perturb=False):
     if drop_history:
         original = system_module.migrate
 
-        def wrapped(comm_, state, destinations, records):
+        def wrapped(comm_, state, destinations, records, *buffers):
             # Keep only the records of particles that stay: the migrated ones arrive without history
             # (of their pairs and of the plane walls alike).
             ids_before = state.ids[:state.owned_count].copy()
-            result = original(comm_, state, destinations, records)
+            result = original(comm_, state, destinations, records, *buffers)
             stayed = ids_before[destinations == comm_.rank]
             return result[np.isin(result[:, 0].astype(np.int64), stayed)]
 
