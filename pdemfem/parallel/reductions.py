@@ -51,32 +51,36 @@ class StepReductions:
         each contributor's `local_totals()`; finish_sum puts them back summed (the forces in place, the
         contributors' through `take_summed_totals`).  Until then they hold this rank's values."""
         assert self._request is None, "finish the step's SUM before starting the next"
-        parts = [np.asarray(scalars, dtype=float), plane_forces.reshape(-1)]
-        parts += [np.asarray(contributor.local_totals(), dtype=float) for contributor in contributors]
-        size = sum(part.size for part in parts)
+        # Written straight into the kept buffer (a list of parts and their sizes cost ~5 us of a ~60 us step on
+        # 2 ranks).
+        scalar_count = len(scalars)
+        plane_end = scalar_count + plane_forces.size
+        totals = [np.asarray(contributor.local_totals(), dtype=float).reshape(-1) for contributor in contributors]
+        sizes = [part.size for part in totals]
+        size = plane_end + sum(sizes)
         if self._sums.size != size:
             self._sums = np.zeros(size)
         buffer = self._sums
-        offset = 0
-        for part in parts:
+        buffer[:scalar_count] = scalars
+        buffer[scalar_count:plane_end] = plane_forces.reshape(-1)
+        offset = plane_end
+        for part in totals:
             buffer[offset:offset + part.size] = part
             offset += part.size
-        self._pending = (parts[0].size, plane_forces, contributors, [part.size for part in parts[2:]])
+        self._pending = (scalar_count, plane_forces, contributors, sizes)
         self._request = comm.Iallreduce(MPI.IN_PLACE, buffer, op=MPI.SUM)
 
-    def finish_sum(self) -> np.ndarray:
+    def finish_sum(self) -> list:
         """Wait for the started SUM; put the plane walls' forces and the contributors' totals in place and
-        return the summed scalars."""
+        return the summed scalars (a list of floats)."""
         self._request.Wait()
         self._request = None
         scalar_count, plane_forces, contributors, sizes = self._pending
         self._pending = None
         buffer = self._sums
-        summed_scalars = buffer[:scalar_count].copy()
-        offset = scalar_count
-        plane_forces.reshape(-1)[:] = buffer[offset:offset + plane_forces.size]
-        offset += plane_forces.size
+        offset = scalar_count + plane_forces.size
+        plane_forces.reshape(-1)[:] = buffer[scalar_count:offset]
         for contributor, size in zip(contributors, sizes):
             contributor.take_summed_totals(buffer[offset:offset + size].copy())
             offset += size
-        return summed_scalars
+        return buffer[:scalar_count].tolist()
