@@ -75,7 +75,7 @@ def _listed_pairs(positions, radii, skin, owned):
     partners = np.empty(100 * count, dtype=np.int32)
     written = _fill_pairs(np.ascontiguousarray(positions[order]), radii[order], skin, owned, order, cells[order],
                           starts, dimensions, _FORWARD_ROWS, np.zeros(count, np.int32), np.zeros((1, 1)), False,
-                          offsets, partners)
+                          np.zeros(0, np.int64), offsets, partners)
     return order, offsets, partners, written
 
 @pytest.mark.parametrize("seed", range(4))
@@ -122,6 +122,50 @@ def test_split_puts_each_rows_pairs_of_owned_particles_first():
         with_ghost_rows += split < len(row)
     assert boundary_rows == with_ghost_rows > 0
     assert np.count_nonzero(before >= owned) > 0  # owned rows with ghost partners were there to move
+
+def test_late_rows_come_last_with_the_same_pairs():
+    """VerletList.build with late_rows (ghosts and the owned particles sent as ghosts): the same pairs, each
+    row's the same partners, the late particles' rows after all others (each part in cell order), and every
+    row with a pair with a ghost among them, so that the pass over those pairs reads one block of the list."""
+    from types import SimpleNamespace
+
+    from pdemfem.neighbors.history import RECORD_KEYS
+    from pdemfem.neighbors.verlet import VerletList
+
+    rng = np.random.default_rng(11)
+    count, owned = 1500, 1000
+    positions = rng.random((count, 3)) * 0.012
+    state = SimpleNamespace(count=count, owned_count=owned, positions=positions, ids=np.arange(count),
+                            radii=rng.uniform(0.5e-3, 1.0e-3, count), material_index=np.zeros(count, np.int32),
+                            fields={})
+    no_records = np.zeros((0, RECORD_KEYS + 3))
+    plain, late_list = VerletList(), VerletList()
+    plain.build(state, 0.3e-3, no_records)
+    # Late: the ghosts, the owned particles with a ghost partner (what sending them as ghosts guarantees) and
+    # some others (a particle sent as a ghost may have no pair across the cut).
+    late = np.zeros(count, dtype=bool)
+    late[owned:] = True
+    first, second = plain.pair_rows()
+    late[np.where(second >= owned, first, second)[(first >= owned) | (second >= owned)]] = True
+    late[rng.choice(owned, 100, replace=False)] = True
+    assert 0 < np.count_nonzero(late[:owned]) < owned
+    late_list.build(state, 0.3e-3, no_records, late)
+
+    def rows(verlet):
+        return {int(i): sorted(verlet.partners[verlet.offsets[r]:verlet.offsets[r + 1]].tolist())
+                for r, i in enumerate(verlet.row_particles)}
+    assert rows(late_list) == rows(plain)
+    row_is_late = late[late_list.row_particles]
+    first_late = int(np.argmax(row_is_late))
+    assert not row_is_late[:first_late].any() and row_is_late[first_late:].all()
+    # Each part keeps the cell order of the plain build (its rows in the same relative order).
+    plain_rank = np.empty(count, dtype=np.int64)
+    plain_rank[plain.row_particles] = np.arange(count)
+    assert np.all(np.diff(plain_rank[late_list.row_particles[:first_late]]) > 0)
+    assert np.all(np.diff(plain_rank[late_list.row_particles[first_late:]]) > 0)
+    boundary_rows = late_list.boundary[0]
+    assert len(boundary_rows) > 0 and late[boundary_rows].all()
+
 
 def _sliding_pair(tangential_speed):
     """Two spheres in an oblique contact (relative normal speed 0.1 m/s, mu = 0.3) with spectators

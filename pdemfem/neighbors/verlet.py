@@ -32,18 +32,21 @@ _FORWARD_ROWS = np.array([(1, 0), (-1, 1), (0, 1), (1, 1)], dtype=np.int64)  # (
 
 @njit(cache=True)
 def _fill_pairs(sorted_positions, sorted_radii, skin, owned_count, order, sorted_cells, starts, dimensions,
-                forward_rows, sorted_materials, cohesion_reach, cohesive, offsets, partners):
-    """Write partners row by row (row p = particle order[p]); returns the pair count (may exceed capacity).
+                forward_rows, sorted_materials, cohesion_reach, cohesive, row_sequence, offsets, partners):
+    """Write partners row by row (row r = particle order[p], p = row_sequence[r], or p = r when row_sequence
+    is empty); returns the pair count (may exceed capacity).
 
-    The particles' positions, radii and materials come in cell order (row p's at p): the stencil's
-    candidates then sit side by side in memory instead of being gathered through `order`.  Without
-    cohesive pairs (`cohesive` False) the cutoff needs no look-up in cohesion_reach."""
+    The particles' positions, radii and materials come in cell order (at p): the stencil's candidates then
+    sit side by side in memory instead of being gathered through `order`.  Without cohesive pairs
+    (`cohesive` False) the cutoff needs no look-up in cohesion_reach."""
     count = order.shape[0]
     capacity = partners.shape[0]
     nx, ny, nz = dimensions[0], dimensions[1], dimensions[2]
+    sequenced = row_sequence.shape[0] > 0
     written = 0
-    for p in range(count):
-        offsets[p] = written
+    for r in range(count):
+        p = row_sequence[r] if sequenced else r
+        offsets[r] = written
         i_is_ghost = order[p] >= owned_count
         cell = sorted_cells[p]
         cx = cell % nx
@@ -123,6 +126,8 @@ def _owned_partners_first(order, offsets, partners, owned_count, interior_ends):
     return boundary_rows
 
 
+_NO_SEQUENCE = np.zeros(0, dtype=np.int64)  # rows in cell order (_fill_pairs)
+
 # A buffer more than this many times the list's size is given back (many particles left the domain).
 _LARGEST_BUFFER_SLACK = 4
 
@@ -169,8 +174,12 @@ class VerletList:
         """(first particle, second particle) of every listed pair."""
         return np.repeat(self.row_particles, np.diff(self.offsets)), self.partners.astype(np.int64)
 
-    def build(self, state, skin: float, records: np.ndarray) -> None:
-        """Rebuild over owned particles and ghosts; restore history from contact records."""
+    def build(self, state, skin: float, records: np.ndarray, late_rows=None) -> None:
+        """Rebuild over owned particles and ghosts; restore history from contact records.
+
+        `late_rows` (a mask over the state's rows, or None): the particles whose rows come after all others
+        (each part in cell order), so that their pairs are one block of the list: the ghosts and the owned
+        particles sent as ghosts, whose rows hold every pair with a ghost (ParticleSystem._rebuild)."""
         count = state.count
         if count == 0:
             self._clear()
@@ -190,9 +199,14 @@ class VerletList:
             self._sorted_positions = np.empty((int(1.25 * count) + 64, 3))
         sorted_positions = self._sorted_positions[:count]
         np.take(state.positions, order, axis=0, out=sorted_positions)
+        row_sequence = _NO_SEQUENCE
+        if late_rows is not None:
+            late_in_cell_order = late_rows[order]
+            if late_in_cell_order.any():
+                row_sequence = np.concatenate([np.flatnonzero(~late_in_cell_order), np.flatnonzero(late_in_cell_order)])
         arguments = (sorted_positions, state.radii[order], skin, state.owned_count,
                      order, sorted_cells, starts, dimensions, _FORWARD_ROWS, sorted_materials,
-                     self.cohesion_reach, self.largest_reach > 0.0, offsets)
+                     self.cohesion_reach, self.largest_reach > 0.0, row_sequence, offsets)
         # The partners and the history are the leading rows of buffers kept from build to build: megabyte
         # arrays allocated afresh at every rebuild cost page faults (or heap fragments that stay resident).
         # The old list is dead here (its records were taken).  One pass when the capacity guess (last
@@ -206,6 +220,8 @@ class VerletList:
             _fill_pairs(*arguments, self._partner_buffer)
         if not needed <= len(self._history_buffer) <= _LARGEST_BUFFER_SLACK * needed + 1024:
             self._history_buffer = np.empty((int(1.1 * needed) + 1024, len(self.history_signs)))
+        if len(row_sequence):
+            order = order[row_sequence]
         body = state.fields.get("clump_body")
         if body is not None:  # members of one rigid clump never interact (pdemfem.clumps.bodies)
             from pdemfem.clumps.bodies import drop_same_body_pairs

@@ -240,6 +240,18 @@ class GhostExchange:
         self.index_map = ParticleIndexMap(owned, self.neighbours, send_rows, send_shifts, receive_counts)
         self._make_step_scatter(state)
 
+    def late_rows(self, state) -> np.ndarray | None:
+        """A mask over the state's rows of the ghosts and the owned particles sent as ghosts (the rows that can
+        hold a pair with a ghost), or None when there are none."""
+        if self.index_map is None or (not state.ghost_count and not any(len(rows) for rows in
+                                                                        self.index_map.send_rows.values())):
+            return None
+        late = np.zeros(state.count, dtype=bool)
+        late[state.owned_count:] = True
+        for rows in self.index_map.send_rows.values():
+            late[rows] = True
+        return late
+
     def _make_step_scatter(self, state) -> None:
         """The per-step scatter for the current index map and state arrays, and its persistent requests."""
         self._free_update_requests()

@@ -349,7 +349,7 @@ class ParticleSystem(kinds.StateComponent):
         self._sort_owned()
         if self.ghosts is not None:
             self.ghosts.plan_and_send(state)
-        self.neighbors.build(state, self.skin, records)
+        self.neighbors.build(state, self.skin, records, self.ghosts.late_rows(state) if self.ghosts else None)
         self.walls.build_candidates(state.positions[:state.owned_count], state.radii[:state.owned_count],
                                     self.skin + self.tables.cohesion_reach, len(self.neighbors.history_signs))
         self.walls.restore_history(state.ids, state.owned_count, records)
