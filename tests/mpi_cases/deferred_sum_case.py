@@ -4,6 +4,9 @@ what a Simulation without solids does) gives the same results, bit for bit, as t
 of two owned particles are computed: a pass that read a ghost before its update arrived (a pair misplaced by
 the list's split, a contributor) would read last step's ghost.
 
+The SUM gathered with the next MAX (each rank adding the rows in rank order) and the SUM as an Iallreduce (what
+more ranks use) give the same values on 2 ranks, where both add the same two numbers.
+
 usage: deferred_sum_case.py OUT.json
 
 The scene has every reader of the summed values: grains between a spinning cylinder drum, a moving, spinning
@@ -55,7 +58,7 @@ def readings(simulation) -> list:
     return [float(value) for value in values]
 
 
-def run(folder: Path, defer: bool, comm, overlap: bool = True) -> tuple:
+def run(folder: Path, defer: bool, comm, overlap: bool = True, gathered: bool = True) -> tuple:
     from pdemfem import Simulation
     from pdemfem.parallel.exchange import GhostExchange
 
@@ -64,6 +67,8 @@ def run(folder: Path, defer: bool, comm, overlap: bool = True) -> tuple:
     assert simulation.particle_system.defer_step_sum  # a scene without solids defers by default
     simulation.particle_system.defer_step_sum = defer
     system = simulation.particle_system
+    if not gathered:  # the SUM as an Iallreduce, as on more ranks than StepReductions gathers on
+        system.reductions.gathered_sum_ranks = 0
     compute_forces = system._compute_forces
     in_flight = [0]
 
@@ -99,11 +104,13 @@ def main():
         deferred, deferred_steps, _ = run(folder, True, comm)
         finished, finished_steps, _ = run(folder, False, comm)
         serial_ghosts, _, boundary_pairs = run(folder, True, comm, overlap=False)
+        reduced, _, _ = run(folder, True, comm, gathered=False)
         comm.Barrier()
     if comm.rank == 0:
         Path(out).write_text(json.dumps({"ranks": comm.size, "deferred": deferred, "finished": finished,
                                          "steps_in_flight": [deferred_steps, finished_steps],
-                                         "serial_ghosts": serial_ghosts, "boundary_pairs": boundary_pairs}))
+                                         "serial_ghosts": serial_ghosts, "boundary_pairs": boundary_pairs,
+                                         "iallreduce": reduced}))
 
 
 if __name__ == "__main__":
