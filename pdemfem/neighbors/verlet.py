@@ -203,7 +203,8 @@ class VerletList:
         if late_rows is not None:
             late_in_cell_order = late_rows[order]
             if late_in_cell_order.any():
-                row_sequence = np.concatenate([np.flatnonzero(~late_in_cell_order), np.flatnonzero(late_in_cell_order)])
+                row_sequence = np.concatenate([np.flatnonzero(~late_in_cell_order),
+                                               np.flatnonzero(late_in_cell_order)])
         arguments = (sorted_positions, state.radii[order], skin, state.owned_count,
                      order, sorted_cells, starts, dimensions, _FORWARD_ROWS, sorted_materials,
                      self.cohesion_reach, self.largest_reach > 0.0, row_sequence, offsets)

@@ -84,7 +84,8 @@ class KeptRows:
         return self.rows
 
 
-def migrate(comm, state, destinations: np.ndarray, records: np.ndarray, kept_rows: KeptRows | None = None) -> np.ndarray:
+def migrate(comm, state, destinations: np.ndarray, records: np.ndarray,
+            kept_rows: KeptRows | None = None) -> np.ndarray:
     """Send owned particles (ghosts already dropped) to their destination ranks.
 
     `records` are contact-history rows (owner id, partner id, xi_x, xi_y, xi_z)

@@ -1,9 +1,9 @@
-"""The DEM step's reductions over the ranks: one MAX and one SUM per step, each a single
-buffer-based Allreduce.
+"""The DEM step's reductions over the ranks: one MAX and one SUM per step, buffer-based (on up to
+GATHERED_SUM_RANKS ranks both in one Allgather, below).
 
 A small Allreduce costs a network latency (microseconds on one node, tens across nodes) whatever
 it carries up to a few kilobytes, and every rank waits in it for the slowest: the number of
-collectives per step, not their size, is what costs.  So a step makes exactly two:
+collectives per step, not their size, is what costs.  So a step makes at most two:
 
 * MAX (`largest`): the largest particle displacement since the list build, which decides the
   rebuild on every rank alike (and feeds the run monitor's runaway stop);
@@ -11,8 +11,8 @@ collectives per step, not their size, is what costs.  So a step makes exactly tw
   every contributor's totals (a mesh or cylinder wall's force, moment and work; a solid
   surface's force and moment), packed into one preallocated float64 buffer.
 
-Both use numpy buffers (no pickling).  The SUM adds exactly the values the separate
-reductions added before, element by element, so results do not change.
+Both use numpy buffers (no pickling).  The SUM adds the values the separate reductions added before,
+element by element (in rank order where gathered: on 2 ranks the same two numbers as before).
 
 The SUM may be left pending (`start_sum`) and finished at the next step's MAX (`finish_sum`;
 ParticleSystem.defer_step_sum).  Every rank then waits once per step instead of twice: the step's two
@@ -87,9 +87,9 @@ class StepReductions:
         return self._request is not None or self._held is not None or self._summed
 
     def start_sum(self, comm, scalars, plane_forces: np.ndarray, contributors) -> None:
-        """Start one SUM over the ranks (held for the next MAX, or a non-blocking Iallreduce) of `scalars`, the plane walls' forces and
-        each contributor's `local_totals()`; finish_sum puts them back summed (the forces in place, the
-        contributors' through `take_summed_totals`).  Until then they hold this rank's values."""
+        """Start one SUM over the ranks (held for the next MAX, or a non-blocking Iallreduce) of `scalars`, the
+        plane walls' forces and each contributor's `local_totals()`; finish_sum puts them back summed (the forces
+        in place, the contributors' through `take_summed_totals`).  Until then they hold this rank's values."""
         assert not self.pending, "finish the step's SUM before starting the next"
         # Written straight into the kept buffer (a list of parts and their sizes cost ~5 us of a ~60 us step on
         # 2 ranks).
