@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from pdemfem import state_dict as kinds
+from pdemfem.kept_rows import SLACK, KeptRows
 from pdemfem.neighbors.cells import cell_grid, cell_indices, sort_by_cell
 from pdemfem.neighbors.history import RECORD_KEYS, collect_records_into, collect_wall_records_into, restore_records
 
@@ -128,8 +129,6 @@ def _owned_partners_first(order, offsets, partners, owned_count, interior_ends):
 
 _NO_SEQUENCE = np.zeros(0, dtype=np.int64)  # rows in cell order (_fill_pairs)
 
-# A buffer more than this many times the list's size is given back (many particles left the domain).
-_LARGEST_BUFFER_SLACK = 4
 
 
 class VerletList:
@@ -148,8 +147,8 @@ class VerletList:
         # What `partners` and `history` are views of (build).
         self._partner_buffer = np.zeros(0, dtype=np.int32)
         self._history_buffer = np.zeros((0, len(self.history_signs)))
-        self._record_buffer = np.zeros((0, RECORD_KEYS + len(self.history_signs)))
-        self._sorted_positions = np.zeros((0, 3))
+        self._records = KeptRows(RECORD_KEYS + len(self.history_signs))
+        self._sorted_positions = KeptRows(3)
         self._clear()
 
     def _clear(self):
@@ -195,9 +194,7 @@ class VerletList:
                             else np.zeros(count, np.int32))
         # The sorted positions into a buffer kept from build to build (a fresh 3-vector per particle is
         # mapped afresh by malloc and page-faulted at every rebuild, pdemfem.runtime.fix_malloc).
-        if not count <= len(self._sorted_positions) <= _LARGEST_BUFFER_SLACK * count + 64:
-            self._sorted_positions = np.empty((int(1.25 * count) + 64, 3))
-        sorted_positions = self._sorted_positions[:count]
+        sorted_positions = self._sorted_positions.at_least(count, 3)[:count]
         np.take(state.positions, order, axis=0, out=sorted_positions)
         row_sequence = _NO_SEQUENCE
         if late_rows is not None:
@@ -213,13 +210,13 @@ class VerletList:
         # The old list is dead here (its records were taken).  One pass when the capacity guess (last
         # size + margin) suffices, two otherwise.
         capacity = int(1.25 * self.pair_count) + 4 * count
-        if not capacity <= len(self._partner_buffer) <= _LARGEST_BUFFER_SLACK * capacity:
+        if not capacity <= len(self._partner_buffer) <= SLACK * capacity:
             self._partner_buffer = np.empty(capacity, dtype=np.int32)
         needed = _fill_pairs(*arguments, self._partner_buffer)
         if needed > len(self._partner_buffer):
             self._partner_buffer = np.empty(int(1.25 * needed), dtype=np.int32)
             _fill_pairs(*arguments, self._partner_buffer)
-        if not needed <= len(self._history_buffer) <= _LARGEST_BUFFER_SLACK * needed + 1024:
+        if not needed <= len(self._history_buffer) <= SLACK * needed + 1024:
             self._history_buffer = np.empty((int(1.1 * needed) + 1024, len(self.history_signs)))
         if len(row_sequence):
             order = order[row_sequence]
@@ -264,17 +261,18 @@ class VerletList:
         # Into a buffer kept from rebuild to rebuild (its leading rows are returned: the caller uses them before
         # the next collection), for the reason the partners' buffer is kept: 1.3 ms against 1.7-2.0 ms (up to
         # 6 ms when the allocator maps the fresh array) for the settle benchmark's 110,000 records.
-        count = self._collect_records(ids, owned_count, wall_candidates)
-        if not count <= len(self._record_buffer) <= _LARGEST_BUFFER_SLACK * count + 1024:
-            self._record_buffer = np.empty((int(1.25 * count) + 1024, RECORD_KEYS + len(self.history_signs)))
-            self._collect_records(ids, owned_count, wall_candidates)
-        return self._record_buffer[:count]
+        collected_into = self._records.rows
+        count = self._collect_records(ids, owned_count, wall_candidates, collected_into)
+        records = self._records.at_least(count, collected_into.shape[1])
+        if records is not collected_into:  # too small (or far too large): collected again into the new one
+            self._collect_records(ids, owned_count, wall_candidates, records)
+        return records[:count]
 
-    def _collect_records(self, ids, owned_count, wall_candidates) -> int:
+    def _collect_records(self, ids, owned_count, wall_candidates, records) -> int:
         count = collect_records_into(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count,
-                                     self.history_signs, self._record_buffer)
+                                     self.history_signs, records)
         if wall_candidates is not None:
-            count = collect_wall_records_into(*wall_candidates, ids, self._record_buffer, count)
+            count = collect_wall_records_into(*wall_candidates, ids, records, count)
         return count
 
     # ------------------------------------------------------------ checkpoints

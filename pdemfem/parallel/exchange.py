@@ -15,6 +15,7 @@ import numpy as np
 from mpi4py import MPI
 from numba import njit
 
+from pdemfem.kept_rows import KeptRows
 from pdemfem.parallel.decomposition import rows_near_box
 from pdemfem.parallel.index_map import ForwardScatter, ParticleIndexMap
 
@@ -67,21 +68,6 @@ def allgather_rows(comm, rows: np.ndarray, width: int) -> np.ndarray:
     displacements = np.concatenate([[0], np.cumsum(counts)[:-1]])
     comm.Allgatherv(rows.ravel(), [gathered, counts, displacements, MPI.DOUBLE])
     return gathered.reshape(-1, width)
-
-
-class KeptRows:
-    """A float64 row buffer kept from call to call: a fresh megabyte array at every rebuild is mapped afresh by
-    malloc and page-faulted as it is written (pdemfem.runtime.fix_malloc)."""
-
-    SLACK = 4  # given back when more than this many times what is needed
-
-    def __init__(self):
-        self.rows = np.zeros((0, 0))
-
-    def at_least(self, count: int, width: int) -> np.ndarray:
-        if self.rows.shape[1] != width or not count <= len(self.rows) <= self.SLACK * count + 1024:
-            self.rows = np.empty((int(1.25 * count) + 1024, width))
-        return self.rows
 
 
 def migrate(comm, state, destinations: np.ndarray, records: np.ndarray,
@@ -211,7 +197,6 @@ class GhostExchange:
         """Choose the ghosts to send (at a rebuild), send them in full, append those received, and
         size the per-step scatter's buffers for the new index map."""
         self.complete_messages()
-        self._free_update_requests()
         owned = state.owned_count
         positions = state.positions[:owned]
         rows = {neighbour: [] for neighbour in self.neighbours}

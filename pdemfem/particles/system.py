@@ -42,10 +42,11 @@ from pdemfem import state_dict as kinds
 from pdemfem.contact import forces as generic_contact_kernels
 from pdemfem.contact.specialized import contact_kernels
 from pdemfem.contact.registry import history_signs
+from pdemfem.kept_rows import KeptRows
 from pdemfem.neighbors.cells import cell_grid, cell_indices, out_of_order_runs, sort_by_cell
 from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import Decomposition, add_pair_costs, recursive_bisection
-from pdemfem.parallel.exchange import GhostExchange, KeptRows, migrate
+from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.parallel.reductions import StepReductions
 from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
 from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES, HeatLedger, heat_content, update_temperatures
