@@ -163,6 +163,10 @@ def test_pile_in_a_corner_is_rebalanced(results):
         assert "->" in messages[-1] and f"{after:.3f}" in messages[-1], messages[-1]
         # Between rebuilds the cost drifts; the last check found it below the threshold.
         assert all(imbalance < THRESHOLD + 0.1 for imbalance in result["history"][-5:, 1])
+        # Each rank's cost total as the check forms it (counts of owned particles, pair ends and touching pair ends)
+        # is the per-particle costs' sum: integers times the cost weights, exact in floating point.
+        exact, estimated = result["cost_totals"].T
+        assert np.all(exact > 0) and np.array_equal(exact, estimated), result["cost_totals"]
 
 
 # ----------------------------------------------------------------------------- 4. lost particles

@@ -134,7 +134,8 @@ _NO_SEQUENCE = np.zeros(0, dtype=np.int64)  # rows in cell order (_fill_pairs)
 class VerletList:
     """row_particles (rows), offsets (rows+1), partners (int32), history (pairs, width) aligned with partners
     (partners and history are the leading rows of buffers reused by the next build); `interior` and
-    `boundary`: the (row particles, pair starts, pair ends) of the pairs without and with a ghost.
+    `boundary`: the (row particles, pair starts, pair ends) of the pairs without and with a ghost
+    (`interior_pair_count` pairs of two owned particles, the rest with a ghost).
 
     `history_signs` (one per history column: -1 for a spring, +1 for a symmetric flag) sets the
     history width (0: no history, e.g. frictionless spheres); `cohesion_reach[a, b]` [m] widens
@@ -157,6 +158,7 @@ class VerletList:
         self.partners = np.zeros(0, dtype=np.int32)
         self.history = np.zeros((0, len(self.history_signs)))
         self.interior = self.boundary = (self.row_particles, self.offsets[:0], self.offsets[:0])
+        self.interior_pair_count = 0  # pairs of two owned particles (the others have a ghost)
         self.builds = 0
         # Contact records loaded from a checkpoint: used by the next build instead of this list's.
         self._loaded_records = None
@@ -244,12 +246,14 @@ class VerletList:
         if owned_count == len(order):  # no ghosts: every pair is interior
             self.interior = (order, offsets[:-1], offsets[1:])
             self.boundary = (order[:0], offsets[:0], offsets[:0])
+            self.interior_pair_count = self.pair_count
             return
         interior_ends = np.empty(len(order), dtype=np.int64)
         _owned_partners_first(order, offsets, self.partners, owned_count, interior_ends)
         rows = np.flatnonzero(interior_ends < offsets[1:])
         self.interior = (order, offsets[:-1], interior_ends)
         self.boundary = (order[rows], interior_ends[rows], offsets[1:][rows])
+        self.interior_pair_count = self.pair_count - int(np.sum(self.boundary[2] - self.boundary[1]))
 
     def contact_records(self, ids: np.ndarray, owned_count: int, wall_candidates=None) -> np.ndarray:
         """History of the springs in use, one row per owned particle in contact (see module doc), followed by

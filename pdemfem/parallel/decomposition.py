@@ -399,3 +399,21 @@ def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_c
             weight = 1.0 + contact_cost if dx * dx + dy * dy + dz * dz < gap * gap else 1.0
             costs[i] += weight
             costs[j] += weight
+
+
+@njit(cache=True)
+def touching_pair_ends(row_particles, offsets, partners, positions, radii, owned_count):
+    """How many ends of the listed pairs that touch are owned particles (two for a pair of owned particles, one for a
+    pair with a ghost)."""
+    ends = 0
+    for r in range(row_particles.shape[0]):
+        i = row_particles[r]
+        for row in range(offsets[r], offsets[r + 1]):
+            j = partners[row]
+            dx = positions[i, 0] - positions[j, 0]
+            dy = positions[i, 1] - positions[j, 1]
+            dz = positions[i, 2] - positions[j, 2]
+            gap = radii[i] + radii[j]
+            if dx * dx + dy * dy + dz * dz < gap * gap:
+                ends += (i < owned_count) + (j < owned_count)
+    return ends

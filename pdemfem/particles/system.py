@@ -45,7 +45,7 @@ from pdemfem.contact.registry import history_signs
 from pdemfem.kept_rows import KeptRows
 from pdemfem.neighbors.cells import cell_grid, cell_indices, out_of_order_runs, sort_by_cell
 from pdemfem.neighbors.verlet import VerletList
-from pdemfem.parallel.decomposition import Decomposition, add_pair_costs, recursive_bisection
+from pdemfem.parallel.decomposition import Decomposition, add_pair_costs, recursive_bisection, touching_pair_ends
 from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.parallel.reductions import StepReductions
 from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
@@ -127,6 +127,7 @@ class ParticleSystem(kinds.StateComponent):
         self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift
         self.fastest_speed = 0.0  # largest particle speed at the last energies() call
         self.rebalances = 0
+        self._touching_pair_ends = 0  # owned ends of touching listed pairs, at the last force evaluation
         self._owned_loads_zeroed = False  # set by step() between its kick_drift and the force evaluation
         self.reductions = StepReductions()  # the step's two collectives: one MAX, one SUM
         self._migrated_records = KeptRows()  # where migrate writes the records kept and arrived
@@ -238,6 +239,9 @@ class ParticleSystem(kinds.StateComponent):
             self.decomposition = decomposition
             self._replace_ghosts(GhostExchange(self.comm, decomposition, self.ghost_cutoff, self.periodic_lengths))
         self._rebuild(records=records, canonical=True)
+        # The balance check's contact count from the new list and positions, as a restarted run finds it (not the
+        # last force evaluation's, which the restarted run did not make): the next rebuild decides alike.
+        self._touching_pair_ends = self._count_touching_pair_ends()
         for name in ("forces", "torques"):
             setattr(state, name, state.remove_field(f"carry:{name}"))
 
@@ -319,19 +323,29 @@ class ParticleSystem(kinds.StateComponent):
         self._owned_loads_zeroed = False
         if records is None:
             records = self._contact_records()
-        # Per-particle cost only matters for balancing several ranks.
-        costs = self._particle_costs() if self.comm.size > 1 else np.ones(state.owned_count)
+        rebalance, before = False, None
+        if ((self.comm.size > 1 or self.decomposition is None or np.any(self.periodic_lengths > 0))
+                and (not canonical or self.decomposition is None)):
+            if force_rebalance or self.decomposition is None:
+                rebalance = True
+            else:
+                # The ranks' cost totals from counts (a pass over every listed pair for the per-particle costs
+                # took 0.4-0.5 ms of a 2-rank rebuild of the settle bed, and a rebalance is rare).
+                before = self._imbalance(np.array([self._cost_total()]))
+                rebalance = before > self.rebalance_threshold
+        # Per-particle costs only matter for balancing several ranks (taken before the ghosts are dropped).
+        costs = (self._particle_costs() if self.comm.size > 1 else np.ones(state.owned_count)) if rebalance else None
         state.drop_ghosts()
         self._wrap_periodic()
         kept = self._remove_lost()
-        costs = costs[kept]
         if not np.all(kept) and len(records):
             # Removed particles' records have no owner left (migrate looks owners up by id).
             records = records[np.isin(records[:, 0].astype(np.int64), state.ids[:state.owned_count])]
         if self.comm.size > 1 or self.decomposition is None or np.any(self.periodic_lengths > 0):
-            if (not canonical or self.decomposition is None) and (
-                    force_rebalance or self.decomposition is None or self._imbalance(costs) > self.rebalance_threshold):
-                before = self._imbalance(costs)
+            if rebalance:
+                costs = costs[kept]
+                if before is None:
+                    before = self._imbalance(costs)
                 self.decomposition = recursive_bisection(self.comm, state.positions, costs[:state.owned_count],
                                                          self.domain_lower, self.domain_upper, self.ghost_cutoff)
                 self._replace_ghosts(GhostExchange(self.comm, self.decomposition, self.ghost_cutoff,
@@ -381,6 +395,25 @@ class ParticleSystem(kinds.StateComponent):
             add_pair_costs(neighbors.row_particles, neighbors.offsets, neighbors.partners, state.positions,
                            state.radii, CONTACT_COST, costs)
         return costs[:state.owned_count]
+
+    def _cost_total(self) -> float:
+        """This rank's total of _particle_costs without the pass over the pairs: PARTICLE_COST per owned particle,
+        1 per listed pair end on an owned particle (two for a pair of owned particles, one for a pair with a ghost)
+        and CONTACT_COST more per touching one, counted as the last force evaluation's contacts (or, after a
+        canonical rebuild, the list's: _touching_pair_ends)."""
+        neighbors = self.neighbors
+        total = PARTICLE_COST * self.state.owned_count
+        if neighbors.pair_count and len(neighbors.row_particles) == self.state.count:
+            interior = neighbors.interior_pair_count
+            total += 2 * interior + (neighbors.pair_count - interior) + CONTACT_COST * self._touching_pair_ends
+        return float(total)
+
+    def _count_touching_pair_ends(self) -> int:
+        state, neighbors = self.state, self.neighbors
+        if not neighbors.pair_count or len(neighbors.row_particles) != state.count:
+            return 0
+        return int(touching_pair_ends(neighbors.row_particles, neighbors.offsets, neighbors.partners, state.positions,
+                                      state.radii, state.owned_count))
 
     def _rows_per_particle(self) -> np.ndarray:
         state = self.state
@@ -482,6 +515,7 @@ class ParticleSystem(kinds.StateComponent):
                           state.torques, temperatures, heat_flows)
         elastic, dissipated, contacts, deepest_pair = self.contact_kernels.pair_forces(*neighbors.interior,
                                                                                        *pair_arguments)
+        pair_contacts = contacts
         if walls.count:
             wall_elastic, wall_dissipated, wall_contacts, deepest_wall = self.contact_kernels.plane_wall_forces(
                 walls.candidate_particles, walls.candidate_walls, walls.points, walls.normals, walls.velocities,
@@ -503,6 +537,10 @@ class ParticleSystem(kinds.StateComponent):
             dissipated += boundary_dissipated
             contacts += boundary_contacts
             deepest_pair = max(deepest_pair, deepest_boundary)
+            pair_contacts += boundary_contacts
+        # Two owned ends per contact of two owned particles; a contact with a ghost has one here and is booked on
+        # one of its two ranks (about half of them on each): the balance check's estimate (_cost_total).
+        self._touching_pair_ends = 2 * pair_contacts
         if deepest_pair > self.deepest_overlaps[0]:
             self.deepest_overlaps[0] = deepest_pair
         for index, contributor in enumerate(self.contributors, start=walls.count):

@@ -377,13 +377,17 @@ def run_pile(comm, out, threshold=1.2):
         # The measured cost imbalance right now (max/mean of 1 + listed pairs per rank).
         current = system._imbalance(system._particle_costs())
         count = sim.particle_count()
+        # The balance check's rank totals (from pair and contact counts) against the per-particle costs' sum: equal
+        # once the contacts are counted on the list (a canonical rebuild does), on every rank.
+        system.canonical_rebuild()
+        cost_totals = np.array(comm.gather((float(np.sum(system._particle_costs())), system._cost_total()), root=0))
     finally:
         logger.removeHandler(handler)
         logger.setLevel(previous_level)
     if comm.rank == 0:
         return dict(rebalances=system.rebalances, last_imbalance=np.array(getattr(system, "last_imbalance",
                                                                                    (np.nan, np.nan))),
-                    current_imbalance=current, messages=np.array(handler.messages or [""]),
+                    current_imbalance=current, messages=np.array(handler.messages or [""]), cost_totals=cost_totals,
                     history=np.array(history), threshold=threshold, count=count, total=total,
                     initial_boxes=initial_boxes, final_boxes=system.decomposition.boxes,
                     centroid=positions.mean(axis=0), positions=positions)
