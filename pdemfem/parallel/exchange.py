@@ -184,7 +184,6 @@ class GhostExchange:
         # once per rebuild and started every step (posting six messages afresh cost 10-17 us a step on 2 ranks).
         self._update_receives = []
         self._update_sends = []
-        self.largest_update_message = 0  # bytes, of the per-step update's messages (sent or received)
 
     def sent_rows_mask(self, positions: np.ndarray) -> np.ndarray:
         """Which of these owned positions plan_and_send would send as a ghost to some neighbour (the same
@@ -249,9 +248,6 @@ class GhostExchange:
                                  for n in self.neighbours if n != rank for rows in scatter.ghost_rows(state, n)]
         self._update_sends = [comm.Send_init(block, dest=n, tag=_GHOST_UPDATE_TAG)
                               for n in self.neighbours if n != rank for block in scatter.send_blocks[n]]
-        sizes = [block.nbytes for n in self.neighbours if n != rank for block in scatter.send_blocks[n]]
-        sizes += [rows.nbytes for n in self.neighbours if n != rank for rows in scatter.ghost_rows(state, n)]
-        self.largest_update_message = max(sizes, default=0)
 
     def _free_update_requests(self) -> None:
         """Free the persistent requests (inactive: complete_messages ran before)."""

@@ -65,9 +65,6 @@ CONTACT_COST = 12.0
 # The pass over the pairs of two owned particles is cut in this many row ranges on several ranks, the ghosts'
 # update progressed between them (ParticleSystem._interior_pairs_progressing).
 INTERIOR_PARTS = 4
-# Messages up to this size are copied to the receiver when sent (Open MPI's shared-memory eager limit); an update
-# of only such messages needs no progress calls, and a pass in one piece saves their ~20 us on a small scene.
-EAGER_BYTES = 4096
 
 # Re-sort the owned particles by cell when the cell order has more breaks than this fraction of them.
 REORDER_FRACTION = 0.1
@@ -520,7 +517,7 @@ class ParticleSystem(kinds.StateComponent):
                           state.angular_velocities, state.radii, state.mass, state.inverse_inertia,
                           state.material_index, tables.coefficients, tables.composition, self.dt, state.forces,
                           state.torques, temperatures, heat_flows)
-        if ghosts_in_flight is None or ghosts_in_flight.largest_update_message <= EAGER_BYTES:
+        if ghosts_in_flight is None or not ghosts_in_flight.neighbours:
             elastic, dissipated, contacts, deepest_pair = self.contact_kernels.pair_forces(*neighbors.interior,
                                                                                            *pair_arguments)
         else:
