@@ -277,11 +277,6 @@ class GhostExchange:
         self._receives = self._update_receives
         self._sends = self._update_sends
 
-    def progress(self) -> None:
-        """Let MPI move the update's messages along (a test of its requests, which never waits)."""
-        if self._receives:
-            MPI.Request.Testall(self._receives + self._sends)
-
     def finish_update(self, state) -> None:
         """The second half of update: wait for the neighbours' rows and write them over the ghost rows.  The
         sends are completed later (complete_messages: at the next update or rebuild); waiting for them here

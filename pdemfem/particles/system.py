@@ -62,10 +62,6 @@ log = logging.getLogger("pdemfem")
 PARTICLE_COST = 5.0
 CONTACT_COST = 12.0
 
-# The pass over the pairs of two owned particles is cut in this many row ranges on several ranks, the ghosts'
-# update progressed between them (ParticleSystem._interior_pairs_progressing).
-INTERIOR_PARTS = 4
-
 # Re-sort the owned particles by cell when the cell order has more breaks than this fraction of them.
 REORDER_FRACTION = 0.1
 
@@ -517,12 +513,8 @@ class ParticleSystem(kinds.StateComponent):
                           state.angular_velocities, state.radii, state.mass, state.inverse_inertia,
                           state.material_index, tables.coefficients, tables.composition, self.dt, state.forces,
                           state.torques, temperatures, heat_flows)
-        if ghosts_in_flight is None or not ghosts_in_flight.neighbours:
-            elastic, dissipated, contacts, deepest_pair = self.contact_kernels.pair_forces(*neighbors.interior,
-                                                                                           *pair_arguments)
-        else:
-            elastic, dissipated, contacts, deepest_pair = self._interior_pairs_progressing(ghosts_in_flight,
-                                                                                         pair_arguments)
+        elastic, dissipated, contacts, deepest_pair = self.contact_kernels.pair_forces(*neighbors.interior,
+                                                                                       *pair_arguments)
         pair_contacts = contacts
         if walls.count:
             wall_elastic, wall_dissipated, wall_contacts, deepest_wall = self.contact_kernels.plane_wall_forces(
@@ -566,29 +558,6 @@ class ParticleSystem(kinds.StateComponent):
                 self.finish_step_sum()
         else:
             self._take_step_sums(elastic, dissipated, contacts)
-
-    def _interior_pairs_progressing(self, ghosts, pair_arguments):
-        """The pairs of two owned particles in INTERIOR_PARTS row ranges, with the update's messages progressed
-        between them: the sender's part of a message beyond the transport's eager size moves only while it is in
-        an MPI call, so without these calls the update crossed only once both ranks waited for it (finish_update
-        61-76 us a step on 2 ranks of the 28k settle bed, 7-12 us with them).  The same rows in the same order:
-        the forces are the same bits; the energy totals are added in parts (last bits)."""
-        rows, starts, ends = self.neighbors.interior
-        count = len(rows)
-        elastic = dissipated = deepest = 0.0
-        contacts = 0
-        bounds = [count * part // INTERIOR_PARTS for part in range(INTERIOR_PARTS + 1)]
-        for part in range(INTERIOR_PARTS):
-            first, last = bounds[part], bounds[part + 1]
-            part_elastic, part_dissipated, part_contacts, part_deepest = self.contact_kernels.pair_forces(
-                rows[first:last], starts[first:last], ends[first:last], *pair_arguments)
-            elastic += part_elastic
-            dissipated += part_dissipated
-            contacts += part_contacts
-            deepest = max(deepest, part_deepest)
-            if part + 1 < INTERIOR_PARTS:
-                ghosts.progress()
-        return elastic, dissipated, contacts, deepest
 
     def finish_step_sum(self) -> None:
         """Collective: finish the step's SUM over the ranks if it is in flight (defer_step_sum)."""
