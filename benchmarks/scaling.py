@@ -44,6 +44,9 @@ Figures per run:
                         one-rank run's: what running on p ranks adds to the work itself (pairs across a cut
                         computed on both sides, ghost rows in the list, the rebuild's partitioning, cores
                         sharing caches and memory), apart from waiting and messages
+  rounds                --repeat N: each round's p-rank run against the same round's one-rank run (taken back
+                        to back), per round and their median: the host's drift over the study moves these
+                        less than the fastest runs, which can come from different rounds
   block floor           --repeat N: the sum over blocks of 100 timed steps of each block's fastest run, and
                         the efficiency from it.  Runs of one rank count compute the same steps bit for bit
                         (checked by their final positions), so block k is the same work in each run and what
@@ -458,6 +461,12 @@ def study(mode: str, args) -> list:
             scale = row["particles"] / base["particles"] if mode == "weak" else 1.0
             row["efficiency_of_block_floors"] = (base["block_floor_wall_seconds"] * base["ranks"] * scale
                                                  / (row["ranks"] * row["block_floor_wall_seconds"]))
+        if args.repeat > 1 and row is not base:
+            # Each round's own runs against each other (taken back to back, minutes apart at most): the host's
+            # drift over the study moves these less than it moves the fastest runs, taken in different rounds.
+            scale = row["particles"] / base["particles"] if mode == "weak" else 1.0
+            row["efficiency_of_rounds"] = [base_wall * base["ranks"] * scale / (row["ranks"] * wall)
+                                           for base_wall, wall in zip(runs[base["ranks"]], runs[row["ranks"]])]
         if "work_core_seconds" in row:
             # Per particle, as the efficiency: what the p-rank run adds to the one-rank run's work (0 for it).
             row["work_increase"] = (row["work_core_seconds"] * base["particles"]
@@ -503,6 +512,12 @@ def print_table(mode: str, rows: list) -> None:
         for row in rows:
             seconds = ", ".join(f"{value:.2f}" for value in row["wall_seconds_of_runs"])
             print(f"  {row['ranks']} rank(s), wall s of the runs in order: {seconds}")
+    for row in rows:
+        if "efficiency_of_rounds" in row:
+            values = row["efficiency_of_rounds"]
+            print(f"  {row['ranks']} rank(s) against {rows[0]['ranks']} within each round (its runs back to back): "
+                  + ", ".join(f"{100 * value:.1f}%" for value in values)
+                  + f" (median {100 * float(np.median(values)):.1f}%)")
     if len(rows) > 1 and all("work_increase" in row for row in rows):
         print("  work (time outside the timed communication, summed over the ranks; the fastest run): " + ", ".join(
             f"{row['ranks']} rank(s) {row['work_core_seconds']:.2f} core-s"

@@ -44,3 +44,26 @@ def test_core_capacity_sums_alone_over_together_per_round(monkeypatch):
     assert alone.shape == together.shape == (3, 1) and np.all(alone > 0) and np.all(together > 0)
     assert np.allclose(result["capacity_of_rounds"], (alone / together).sum(axis=1), rtol=0, atol=1e-15)
     assert result["capacity"] == float(np.median(result["capacity_of_rounds"]))
+
+
+def test_round_efficiency_pairs_the_runs_of_each_round(monkeypatch):
+    """--repeat N: the p-rank run of each round against the one-rank run of the same round (the runs are faked: only
+    the pairing and the arithmetic are tested).  The fastest runs come from different rounds here, so the usual
+    efficiency (4.0 / (2 x 2.5) = 80 %) differs from both rounds' own figures."""
+    walls = {1: iter([4.0, 6.0]), 2: iter([3.5, 2.5])}
+
+    def fake_launch(ranks, particles, args):
+        wall = next(walls[ranks])
+        return {"ranks": ranks, "particles": particles, "wall_seconds": wall, "block_wall_seconds": [wall],
+                "positions_checksum": 1.0, "particle_steps_per_second": particles * 10 / wall,
+                "work_core_seconds": wall * ranks}
+
+    monkeypatch.setattr(scaling, "launch", fake_launch)
+    monkeypatch.setattr(scaling, "core_capacity", lambda cores, rounds: {"capacity": 2.0})
+    args = type("Args", (), dict(repeat=2, ranks=[1, 2], particles=1000, per_rank=1000, launcher=None,
+                                 busy_reference=False))()
+    rows = scaling.study("strong", args)
+    assert "efficiency_of_rounds" not in rows[0]
+    # Round 1: 4.0 / (2 x 3.5); round 2: 6.0 / (2 x 2.5).  Same arithmetic as the code: equal to the last bit.
+    assert rows[1]["efficiency_of_rounds"] == [4.0 / (2 * 3.5), 6.0 / (2 * 2.5)]
+    assert abs(rows[1]["efficiency"] - 4.0 / (2 * 2.5)) < 1e-15
