@@ -109,7 +109,7 @@ def test_split_puts_each_rows_pairs_of_owned_particles_first():
     order, offsets, partners, written = _listed_pairs(positions, radii, 0.3e-3, owned)
     before = partners[:written].copy()
     interior_ends = np.empty(count, dtype=np.int64)
-    boundary_rows = _owned_partners_first(order, offsets, partners[:written], owned, interior_ends)
+    boundary_rows = _owned_partners_first(order, offsets, partners[:written], owned, interior_ends, 0)
     with_ghost_rows = 0
     for p in range(count):
         row, split = partners[offsets[p]:offsets[p + 1]], interior_ends[p] - offsets[p]
@@ -165,6 +165,15 @@ def test_late_rows_come_last_with_the_same_pairs():
     assert np.all(np.diff(plain_rank[late_list.row_particles[first_late:]]) > 0)
     boundary_rows = late_list.boundary[0]
     assert len(boundary_rows) > 0 and late[boundary_rows].all()
+
+    # The split read only the late rows, and found the same pairs with a ghost as the plain build's over all rows.
+    def pairs_with_a_ghost(verlet):
+        rows, starts, ends = verlet.boundary
+        return sorted((int(i), int(j)) for i, start, end in zip(rows, starts, ends)
+                      for j in verlet.partners[start:end])
+    assert pairs_with_a_ghost(late_list) == pairs_with_a_ghost(plain)
+    assert late_list.interior_pair_count == plain.interior_pair_count > 0
+    assert all(j >= owned or i >= owned for i, j in pairs_with_a_ghost(late_list))
 
 
 def _sliding_pair(tangential_speed):
