@@ -24,3 +24,10 @@ class KeptRows:
         if self.rows.shape[1] != width or not count <= len(self.rows) <= SLACK * count + SPARE_ROWS:
             self.rows = np.empty((int(1.25 * count) + SPARE_ROWS, width))
         return self.rows
+
+    def leads(self, array: np.ndarray) -> bool:
+        """Whether `array` is the buffer's leading rows (a view that starts where the buffer starts, rows in order):
+        then the rows after it are free to write."""
+        return (array.ndim == 2 and array.shape[1] == self.rows.shape[1] and len(array) <= len(self.rows)
+                and array.strides == self.rows.strides
+                and array.__array_interface__["data"][0] == self.rows.__array_interface__["data"][0])

@@ -305,13 +305,24 @@ def test_migration_splits_each_record_to_its_owners_destination(id_stride):
     kept_records, moving_records = np.empty_like(records), np.empty_like(records)
     moving_destinations = np.empty(len(records), dtype=np.int64)
     kept, moving = _split_records(records, leaving_ids, leaving_destinations, kept_records, moving_records,
-                                  moving_destinations)
+                                  moving_destinations, False)
     leaves = np.isin(records[:, 0].astype(np.int64), leaving_ids)
     assert 0 < moving == np.count_nonzero(leaves) and kept == len(records) - moving
     assert np.array_equal(kept_records[:kept], records[~leaves])
     assert np.array_equal(moving_records[:moving], records[leaves])
     owners = records[leaves, 0].astype(np.int64)
     assert np.array_equal(moving_destinations[:moving], leaving_destinations[np.searchsorted(leaving_ids, owners)])
+    # In place (the records lead a longer buffer, as the list's collected records do): the same split, the kept
+    # records moved up over the leaving ones' rows.
+    buffer = np.full((len(records) + 100, records.shape[1]), np.nan)
+    buffer[:len(records)] = records
+    in_place_moving = np.empty_like(records)
+    in_place_destinations = np.empty(len(records), dtype=np.int64)
+    assert _split_records(buffer[:len(records)], leaving_ids, leaving_destinations, buffer, in_place_moving,
+                          in_place_destinations, True) == (kept, moving)
+    assert np.array_equal(buffer[:kept], records[~leaves])
+    assert np.array_equal(in_place_moving[:moving], records[leaves])
+    assert np.array_equal(in_place_destinations[:moving], moving_destinations[:moving])
 
 
 def test_entry_and_state_dict_shape_are_checked(tmp_path):

@@ -171,6 +171,12 @@ class VerletList:
         return float(self.cohesion_reach.max()) if self.cohesion_reach.size else 0.0
 
     @property
+    def record_buffer(self) -> KeptRows:
+        """The buffer contact_records returns the leading rows of (free to reuse once the records are read back:
+        migration moves them up in place)."""
+        return self._records
+
+    @property
     def pair_count(self) -> int:
         return len(self.partners)
 

@@ -356,7 +356,8 @@ class ParticleSystem(kinds.StateComponent):
                 destinations = self.decomposition.owners(state.positions)
                 if self.clumps is not None:  # members go with their bodies, whole bodies move
                     destinations = self.clumps.member_destinations(state, destinations, self.decomposition)
-                records = migrate(self.comm, state, destinations, records, self._migrated_records)
+                records = migrate(self.comm, state, destinations, records, self._migrated_records,
+                                  self.neighbors.record_buffer)
                 if self.clumps is not None:
                     self.clumps.migrate_bodies(self.comm, self.decomposition)
         if canonical and state.owned_count:
