@@ -133,7 +133,6 @@ def _owned_partners_first(order, offsets, partners, owned_count, interior_ends, 
 _NO_SEQUENCE = np.zeros(0, dtype=np.int64)  # rows in cell order (_fill_pairs)
 
 
-
 class VerletList:
     """row_particles (rows), offsets (rows+1), partners (int32), history (pairs, width) aligned with partners
     (partners and history are the leading rows of buffers reused by the next build); `interior` and

@@ -383,6 +383,16 @@ def rows_near_box(points, shift, box_lower, box_upper, cutoff):
     return rows[:found]
 
 
+@njit(inline="always", cache=True)
+def _touching(positions, radii, i, j):
+    """Whether particles i and j overlap (their centres closer than the sum of their radii)."""
+    dx = positions[i, 0] - positions[j, 0]
+    dy = positions[i, 1] - positions[j, 1]
+    dz = positions[i, 2] - positions[j, 2]
+    gap = radii[i] + radii[j]
+    return dx * dx + dy * dy + dz * dz < gap * gap
+
+
 @njit(cache=True)
 def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_cost, costs):
     """The bisection's particle weights from the neighbour list (ParticleSystem._particle_costs): costs[i] and
@@ -392,11 +402,7 @@ def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_c
         i = row_particles[r]
         for row in range(offsets[r], offsets[r + 1]):
             j = partners[row]
-            dx = positions[i, 0] - positions[j, 0]
-            dy = positions[i, 1] - positions[j, 1]
-            dz = positions[i, 2] - positions[j, 2]
-            gap = radii[i] + radii[j]
-            weight = 1.0 + contact_cost if dx * dx + dy * dy + dz * dz < gap * gap else 1.0
+            weight = 1.0 + contact_cost if _touching(positions, radii, i, j) else 1.0
             costs[i] += weight
             costs[j] += weight
 
@@ -404,16 +410,12 @@ def add_pair_costs(row_particles, offsets, partners, positions, radii, contact_c
 @njit(cache=True)
 def touching_pair_ends(row_particles, offsets, partners, positions, radii, owned_count):
     """How many ends of the listed pairs that touch are owned particles (two for a pair of owned particles, one for a
-    pair with a ghost)."""
+    pair with a ghost): the touching test of add_pair_costs, counted."""
     ends = 0
     for r in range(row_particles.shape[0]):
         i = row_particles[r]
         for row in range(offsets[r], offsets[r + 1]):
             j = partners[row]
-            dx = positions[i, 0] - positions[j, 0]
-            dy = positions[i, 1] - positions[j, 1]
-            dz = positions[i, 2] - positions[j, 2]
-            gap = radii[i] + radii[j]
-            if dx * dx + dy * dy + dz * dz < gap * gap:
+            if _touching(positions, radii, i, j):
                 ends += (i < owned_count) + (j < owned_count)
     return ends

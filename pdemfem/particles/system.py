@@ -334,7 +334,9 @@ class ParticleSystem(kinds.StateComponent):
                 before = self._imbalance(np.array([self._cost_total()]))
                 rebalance = before > self.rebalance_threshold
         # Per-particle costs only matter for balancing several ranks (taken before the ghosts are dropped).
-        costs = (self._particle_costs() if self.comm.size > 1 else np.ones(state.owned_count)) if rebalance else None
+        costs = None
+        if rebalance:
+            costs = self._particle_costs() if self.comm.size > 1 else np.ones(state.owned_count)
         state.drop_ghosts()
         self._wrap_periodic()
         kept = self._remove_lost()
@@ -392,7 +394,7 @@ class ParticleSystem(kinds.StateComponent):
         state = self.state
         costs = np.full(state.count, PARTICLE_COST)
         neighbors = self.neighbors
-        if neighbors.pair_count and len(neighbors.row_particles) == state.count:
+        if self._list_is_current():
             add_pair_costs(neighbors.row_particles, neighbors.offsets, neighbors.partners, state.positions,
                            state.radii, CONTACT_COST, costs)
         return costs[:state.owned_count]
@@ -404,14 +406,19 @@ class ParticleSystem(kinds.StateComponent):
         canonical rebuild, the list's: _touching_pair_ends)."""
         neighbors = self.neighbors
         total = PARTICLE_COST * self.state.owned_count
-        if neighbors.pair_count and len(neighbors.row_particles) == self.state.count:
+        if self._list_is_current():
             interior = neighbors.interior_pair_count
             total += 2 * interior + (neighbors.pair_count - interior) + CONTACT_COST * self._touching_pair_ends
         return float(total)
 
+    def _list_is_current(self) -> bool:
+        """Whether the list has pairs and one row per row of the state (rows appended or removed since its build
+        leave it stale until the next one)."""
+        return bool(self.neighbors.pair_count) and len(self.neighbors.row_particles) == self.state.count
+
     def _count_touching_pair_ends(self) -> int:
         state, neighbors = self.state, self.neighbors
-        if not neighbors.pair_count or len(neighbors.row_particles) != state.count:
+        if not self._list_is_current():
             return 0
         return int(touching_pair_ends(neighbors.row_particles, neighbors.offsets, neighbors.partners, state.positions,
                                       state.radii, state.owned_count))
@@ -419,7 +426,7 @@ class ParticleSystem(kinds.StateComponent):
     def _rows_per_particle(self) -> np.ndarray:
         state = self.state
         counts = np.zeros(state.count)
-        if self.neighbors.pair_count and len(self.neighbors.row_particles) == state.count:
+        if self._list_is_current():
             first, second = self.neighbors.pair_rows()
             counts += np.bincount(first, minlength=state.count)
             counts += np.bincount(second, minlength=state.count)
