@@ -171,6 +171,31 @@ def test_ghosts_appended_again_reuse_the_arrays_and_equal_a_fresh_append():
         assert np.array_equal(state.array(name), fresh.array(name)), name
 
 
+def test_a_selection_renumbered_through_a_reorder_is_the_selection_of_the_reordered_rows():
+    """A rebuild selects the ghosts to send before its cell sort and renumbers them through the reorder instead
+    of selecting again: the same rows, in the same (ascending) order, so the same ghosts arrive."""
+    state, ghosts, _ = periodic_ghosts(600)
+    state.drop_ghosts()
+    selection = ghosts.select(state.positions[:state.owned_count])
+    assert sum(len(rows) for rows in selection) > 0
+    permutation = np.random.default_rng(3).permutation(state.owned_count)
+    state.reorder(permutation)
+    renumbered = ghosts.renumber(selection, permutation)
+    again = ghosts.select(state.positions[:state.owned_count])
+    assert len(renumbered) == len(again)
+    for given, expected in zip(renumbered, again):
+        assert np.array_equal(given, expected)
+    mask = ghosts.sent_rows_mask(renumbered, state.owned_count)
+    assert np.array_equal(np.flatnonzero(mask), np.unique(np.concatenate(again)))
+    ghosts.plan_and_send(state, renumbered)
+    fresh, fresh_ghosts, _ = periodic_ghosts(600)  # the same rows, reordered alike and selected afresh
+    fresh.drop_ghosts()
+    fresh.reorder(permutation)
+    fresh_ghosts.plan_and_send(fresh)
+    for name in state.registry:
+        assert np.array_equal(state.array(name), fresh.array(name)), name
+
+
 def test_reorder_permutes_every_field_and_leaves_spare_rows_for_the_ghosts():
     """The cell sort's reorder gathers every field by the permutation into a buffer with spare rows: every
     field of each particle stays together, and the ghosts appended next write into those rows (the arrays

@@ -196,24 +196,40 @@ class GhostExchange:
         self._update_receives = []
         self._update_sends = []
 
-    def sent_rows_mask(self, positions: np.ndarray) -> np.ndarray:
-        """Which of these owned positions plan_and_send would send as a ghost to some neighbour (the same
-        selection): the particles with pairs across a cut."""
-        sent = np.zeros(len(positions), dtype=bool)
-        for _, shift, lower, upper in self.targets:
-            sent[rows_near_box(positions, np.asarray(shift, dtype=np.float64), lower, upper, self.cutoff)] = True
+    def select(self, positions: np.ndarray) -> list:
+        """Per target (neighbour and periodic shift), the rows of these owned positions within the cutoff of its
+        box, ascending: the ghosts to send.  A rebuild selects once (ParticleSystem._sort_owned, which puts them
+        last) and hands the selection, renumbered through its reorder, to plan_and_send."""
+        return [rows_near_box(positions, np.asarray(shift, dtype=np.float64), lower, upper, self.cutoff)
+                for _, shift, lower, upper in self.targets]
+
+    @staticmethod
+    def sent_rows_mask(selection: list, count: int) -> np.ndarray:
+        """Which of `count` owned rows a selection sends to some neighbour (the particles with pairs across a
+        cut)."""
+        sent = np.zeros(count, dtype=bool)
+        for rows in selection:
+            sent[rows] = True
         return sent
 
-    def plan_and_send(self, state) -> None:
-        """Choose the ghosts to send (at a rebuild), send them in full, append those received, and
-        size the per-step scatter's buffers for the new index map."""
+    @staticmethod
+    def renumber(selection: list, permutation: np.ndarray) -> list:
+        """The selection after state.reorder(permutation) (new row k was row permutation[k]), ascending: what
+        select gives on the reordered positions."""
+        new_row_of = np.empty(len(permutation), dtype=np.int64)
+        new_row_of[permutation] = np.arange(len(permutation))
+        return [np.sort(new_row_of[rows]) for rows in selection]
+
+    def plan_and_send(self, state, selection: list | None = None) -> None:
+        """Send the selected ghosts (`select` on the owned positions, made here when not given) in full, append
+        those received, and size the per-step scatter's buffers for the new index map."""
         self.complete_messages()
         owned = state.owned_count
-        positions = state.positions[:owned]
+        if selection is None:
+            selection = self.select(state.positions[:owned])
         rows = {neighbour: [] for neighbour in self.neighbours}
         shifts = {neighbour: [] for neighbour in self.neighbours}
-        for other, shift, lower, upper in self.targets:
-            near = rows_near_box(positions, np.asarray(shift, dtype=np.float64), lower, upper, self.cutoff)
+        for (other, shift, _, _), near in zip(self.targets, selection):
             rows[other].append(near)
             shifts[other].append(np.tile(shift, (len(near), 1)))
         send_rows = {n: np.concatenate(rows[n]).astype(np.int64) if rows[n] else np.zeros(0, np.int64)
