@@ -42,6 +42,9 @@ class LocalMesh:
     group_faces: dict = field(default_factory=dict)  # name -> local faces (3 or 6 nodes) touching owned nodes
     group_nodes: dict = field(default_factory=dict)  # name -> owned local node numbers on the group
     contact_faces: dict = field(default_factory=dict)  # name -> all faces of a contact group, global numbers
+    # The same faces in the input's node numbering (P2 midsides: corners + edge index): the rank-count independent
+    # order of a contact surface's nodes (checkpoints written on one rank count are read on another).
+    contact_faces_input: dict = field(default_factory=dict)
     point_nodes: np.ndarray = None  # global node nearest to each requested point
     bounding_box: np.ndarray = None  # (2, 3)
 
@@ -169,6 +172,7 @@ def build_partition(mesh: GlobalMesh, element: str, n_parts: int, group_names, c
                 group_faces=group_faces,
                 group_nodes=group_nodes,
                 contact_faces=contact_new,
+                contact_faces_input={name: faces_of[name] for name in contact_names},
                 point_nodes=point_nodes,
                 bounding_box=bounding_box,
             )

@@ -768,7 +768,8 @@ class Solid(kinds.StateComponent):
                             problem=f"not a contact group of solid '{self.name}' (contact: {list(self.config.contact)})",
                             fix="list it under the solid's contact: key")
         if groups not in self._surfaces:
-            self._surfaces[groups] = ContactSurface(self.mesh.contact_faces, groups, self.coordinates_vec)
+            self._surfaces[groups] = ContactSurface(self.mesh.contact_faces, groups, self.coordinates_vec,
+                                                    self.mesh.contact_faces_input)
         return self._surfaces[groups]
 
     def surface_triangles(self, groups=None) -> np.ndarray:

@@ -69,16 +69,29 @@ class NodeGather:
         return self.surface.reference_positions[self.rows] + self.vector(displacement), self.vector(velocity)
 
 
+def _triangles(faces_by_group: dict, groups) -> np.ndarray:
+    """The groups' faces as flat triangles (a P2 face split into 4), in group and face order."""
+    faces = [faces_by_group[name] for name in groups]
+    faces = np.vstack(faces) if faces else np.zeros((0, 3), dtype=np.int64)
+    return np.ascontiguousarray(split_p2_faces(faces) if faces.shape[1] == 6 else faces, dtype=np.int64)
+
+
 class ContactSurface:
-    def __init__(self, faces_by_group: dict, groups, reference_coordinates: PETSc.Vec):
-        """Collective. reference_coordinates: undeformed nodal positions, laid out like the displacement Vec."""
-        faces = [faces_by_group[name] for name in groups]
-        faces = np.vstack(faces) if faces else np.zeros((0, 3), dtype=np.int64)
-        triangles = split_p2_faces(faces) if faces.shape[1] == 6 else faces
+    def __init__(self, faces_by_group: dict, groups, reference_coordinates: PETSc.Vec, input_faces_by_group=None):
+        """Collective. reference_coordinates: undeformed nodal positions, laid out like the displacement Vec.
+        input_faces_by_group: the same faces in the input's node numbering; the surface's nodes are then in the
+        order of their input numbers, the same on any rank count (else in the order of their global numbers,
+        which the partition renumbers: a checkpoint's per-vertex arrays would not fit another rank count)."""
         self.groups = tuple(groups)
-        self.triangles_global = np.ascontiguousarray(triangles, dtype=np.int64)
-        self.node_indices = np.unique(self.triangles_global)  # global node numbers, ascending
-        self.triangles = np.searchsorted(self.node_indices, self.triangles_global)  # into node_indices
+        self.triangles_global = _triangles(faces_by_group, groups)
+        if input_faces_by_group is None:
+            self.node_indices = np.unique(self.triangles_global)  # global node numbers, ascending
+            self.triangles = np.searchsorted(self.node_indices, self.triangles_global)  # into node_indices
+        else:
+            # The input faces split alike: triangle for triangle, corner for corner the same nodes.
+            input_numbers, first = np.unique(_triangles(input_faces_by_group, groups), return_index=True)
+            self.node_indices = self.triangles_global.ravel()[first]  # global numbers, by input number
+            self.triangles = np.searchsorted(input_numbers, _triangles(input_faces_by_group, groups))
         self._layout = reference_coordinates
         self.reference_positions = np.zeros((len(self.node_indices), 3))
         self.whole = NodeGather(self, np.arange(len(self.node_indices)), reference_coordinates)
