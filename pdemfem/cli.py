@@ -368,11 +368,11 @@ def check_report(path: str) -> tuple:
 
     scene, base_dir = load_scene(path)
     try:
-        placed = _validate_as_run(scene, base_dir)
+        placed, solids = _validate_as_run(scene, base_dir)
     except SceneError as error:
         raise _name_the_file(error, path) from None
     try:
-        return _report(path, scene, base_dir, placed)
+        return _report(path, scene, base_dir, placed, solids)
     except (OverflowError, ZeroDivisionError, FloatingPointError) as error:
         # The schema's bounds cannot catch every combination of extreme values (a modulus near
         # the float64 limit, ...); report it as the scene's fault, not with a traceback.
@@ -380,22 +380,54 @@ def check_report(path: str) -> tuple:
                          "check the magnitudes and units of the moduli, densities, radii and coordinates") from None
 
 
-def _validate_as_run(scene, base_dir) -> int:
+def _validate_as_run(scene, base_dir) -> tuple:
     """What `run` reads before its first step, read the same way: the insertion, the mesh-wall
-    files, and the checks that relate them (coordinates, domain.box, periodic lengths).
-    Returns the number of particles placed."""
+    files, the solids' meshes, and the checks that relate them (coordinates, domain.box, periodic
+    lengths, particles starting behind or deep in a wall or inside a solid).
+    Returns (the number of particles placed, the solids by name or None)."""
+    from pdemfem.contact.tables import build_contact_tables
     from pdemfem.particles.insert import insert_particles
     from pdemfem.particles.stream import validate_streams
-    from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
+    from pdemfem.scene import derived
+    from pdemfem.scene.inputs import start_solids, start_surfaces, validate_geometry, validate_scene_coordinates
     from pdemfem.scene.loader import resolve_path
     from pdemfem.walls.factory import build_contributor_walls
 
     validate_scene_coordinates(scene)
+    # The contact table as the run builds it (a derived linear stiffness needs an impact speed).
+    build_contact_tables(scene, characteristic_speed=derived.expected_impact_speed(scene))
     inserted = insert_particles(scene)
     validate_streams(scene)
     walls = build_contributor_walls(scene.walls, list(scene.materials), lambda file: resolve_path(base_dir, file))
-    validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in walls if hasattr(wall, "vertices")])
-    return len(inserted.radii)
+    solids = build_scene_solids(scene, base_dir) if scene.solids else None
+    surfaces = []
+    if solids and len(inserted.radii):
+        for config in scene.solids:
+            if config.contact:
+                solid = solids[config.name]
+                contact = solid.contact_surface()
+                _, positions, _ = solid.surface_state()
+                surfaces.append((config.name, positions, contact.triangles))
+    validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in walls if hasattr(wall, "vertices")],
+                      surfaces=start_surfaces(scene, walls, surfaces),
+                      solids=start_solids(scene, solids) if solids else ())
+    return len(inserted.radii), solids
+
+
+def build_scene_solids(scene, base_dir) -> dict:
+    """The scene's solids for `check` (each rank whole, no static solve); a misnamed mesh group is a
+    SceneError naming its key (solids[i].fixed[k], ...)."""
+    from pdemfem.coupling.check import build_solids
+    from pdemfem.errors import MeshError
+    from pdemfem.scene.inputs import locate_solid_error
+
+    try:
+        return build_solids(scene, base_dir)
+    except (MeshError, SceneError) as error:
+        located = locate_solid_error(scene, error)
+        if located is error:
+            raise
+        raise located from None
 
 
 def _stream_text(insert) -> str:
@@ -409,7 +441,7 @@ def _clump_sphere_count(group) -> int:
     return len(clump_spheres(group.clump)[1])
 
 
-def _report(path, scene, base_dir, placed) -> tuple:
+def _report(path, scene, base_dir, placed, solids=None) -> tuple:
     from pdemfem.scene import derived
     from pdemfem.scene.loader import scene_hash
 
@@ -433,10 +465,11 @@ def _report(path, scene, base_dir, placed) -> tuple:
     lines.append(f"materials: {', '.join(scene.materials)}; contact models: {', '.join(models)}")
 
     rayleigh = derived.rayleigh_time(scene)
-    from pdemfem.coupling.check import HELD_FORCE_MARGIN, build_solids, held_force_step_limit
+    from pdemfem.coupling.check import HELD_FORCE_MARGIN, held_force_step_limit
 
     # The solids are built once, here: for the step without particles, the held-force limit and the report.
-    solids = build_solids(scene, base_dir) if scene.solids else None
+    if solids is None and scene.solids:
+        solids = build_scene_solids(scene, base_dir)
     solid_step = (min(solid.critical_time_step() for solid in solids.values())
                   if solids and not scene.particles else None)
     dt = derived.time_step(scene, solid_critical_step=solid_step)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import collections
 import csv
+import logging
 import math
 import re
 from pathlib import Path
@@ -29,6 +30,8 @@ from pdemfem.errors import PdemfemError
 from pdemfem.monitor import THERMAL_ENERGIES, total_energy
 
 __all__ = ["read_history", "plot_history"]
+
+log = logging.getLogger("pdemfem")
 
 _WALL_FORCE = re.compile(r"^force_(.+)_([xyz])$")
 _MEAN_FORCE = re.compile(r"^mean_force_(.+)_([xyz])$")
@@ -48,7 +51,8 @@ def read_history(path) -> Dict[str, np.ndarray]:
             raise PdemfemError(str(folder), "no such output directory", hint)
         raise PdemfemError(str(path), "history.csv not found in the output directory", hint)
     with open(path, newline="") as handle:
-        rows = list(csv.reader(handle))
+        text = handle.read()
+    rows = list(csv.reader(text.splitlines()))
     if not rows or not rows[0]:
         raise PdemfemError(str(path), "the file is empty (no header)", "re-run the scene; history.csv is written by rank 0")
     header = [name.strip() for name in rows[0]]
@@ -56,6 +60,12 @@ def read_history(path) -> Dict[str, np.ndarray]:
         raise PdemfemError(str(path), f"no 'time' column (columns: {', '.join(header)})",
                            "pass the output directory of a pdemfem run")
     body = [row for row in rows[1:] if row]
+    if body and _incomplete(body[-1], header, text):
+        # Rows are flushed whole; a last row cut short is a run killed while writing it (or still running).
+        log.warning("note: %s: the last row (line %d) is incomplete (%d of %d columns%s), as a run killed while "
+                    "writing it leaves it; plotting the %d complete rows without it", path, len(rows),
+                    len(body[-1]), len(header), "" if text.endswith("\n") else ", no line end", len(body) - 1)
+        body = body[:-1]
     if not body:
         raise PdemfemError(str(path), "no data rows yet", "let the run write at least one output interval")
     columns: Dict[str, np.ndarray] = {}
@@ -69,6 +79,17 @@ def read_history(path) -> Dict[str, np.ndarray]:
                                    "the file is damaged; re-run the scene") from None
         columns[name] = np.asarray(values)
     return columns
+
+
+def _incomplete(row, header, text: str) -> bool:
+    """A last row cut short: fewer fields than the header, no line end, or a field that is no number."""
+    if len(row) != len(header) or not text.endswith(("\n", "\r")):
+        return True
+    try:
+        [float(value) for value in row]
+    except ValueError:
+        return True
+    return False
 
 
 def is_constant(values: np.ndarray) -> bool:

@@ -20,7 +20,7 @@ from pdemfem.contact.tables import build_contact_tables
 from pdemfem.coupling.check import HELD_FORCE_MARGIN, blended_transfer, coupling_assessment
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
-from pdemfem.errors import SceneError, SolverError
+from pdemfem.errors import MeshError, SceneError, SolverError
 from pdemfem.io.history import IntervalMean
 from pdemfem.io.simulation_io import SimulationIO
 from pdemfem.monitor import DivergenceMonitor
@@ -32,7 +32,8 @@ from pdemfem.particles.stream import ParticleStreams, stream_radius_range
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
-from pdemfem.scene.inputs import validate_geometry, validate_scene_coordinates
+from pdemfem.scene.inputs import (locate_solid_error, start_solids, start_surfaces, validate_geometry,
+                                   validate_scene_coordinates)
 from pdemfem.scene.loader import load_scene, output_directory, resolve_path
 from pdemfem.walls.factory import build_contributor_walls
 from pdemfem.walls.plane import PlaneWalls
@@ -183,8 +184,14 @@ class Simulation:
             for config in scene.solids if config.contact
         ]
         self.contributor_walls += [surface.triangle_surface for surface in self.coupled_surfaces]
-        validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in self.contributor_walls
-                                            if hasattr(wall, "vertices")])  # the checks `pdemfem check` makes
+        # The checks `pdemfem check` makes, before anything is written: coordinates, domain.box, periodic
+        # lengths, particles starting behind or deep in a wall or a solid's surface, or inside a solid.
+        validate_geometry(
+            scene, inserted, [(wall.name, wall.vertices) for wall in self.contributor_walls if hasattr(wall, "vertices")],
+            surfaces=start_surfaces(scene, self.contributor_walls,
+                                    [(surface.name, surface.triangle_surface.vertices, surface.triangle_surface.triangles)
+                                     for surface in self.coupled_surfaces]),
+            solids=start_solids(scene, self.solids), comm=self.comm)
         smallest_radius = min(radius_bounds, default=1.0)
         skin = scene.neighbors.skin or DEFAULT_SKIN_FRACTION * smallest_radius
         self.streams = ParticleStreams.from_scene(scene, tables.material_names, next_id=total, dt=self.dt)
@@ -210,8 +217,15 @@ class Simulation:
             # it conduct and requires them); otherwise it is adiabatic and nothing thermal is allocated.
             conducts = (self.scene.heat_enabled and material.conductivity is not None
                         and material.heat_capacity is not None)
-            solid = Solid(config, material, gravity=self.scene.gravity, comm=self.comm, base_dir=self.base_dir,
-                          heat=conducts)
+            try:
+                solid = Solid(config, material, gravity=self.scene.gravity, comm=self.comm, base_dir=self.base_dir,
+                              heat=conducts)
+            except (MeshError, SceneError) as error:
+                # A misnamed group: name the scene key (solids[i].fixed[k]) with a "did you mean".
+                located = locate_solid_error(self.scene, error)
+                if located is error:
+                    raise
+                raise located from None
             held = self.comm.allreduce(int(solid.constrained_dofs.sum()))
             if held:
                 solid.static_solve()
@@ -257,7 +271,8 @@ class Simulation:
     @collective_errors
     def run(self, progress: bool = True) -> None:
         """Advance to time.end, writing history rows and field series every output interval and
-        checkpoints every checkpoint interval.  SIGTERM/SIGUSR1 stop the run at the next stop
+        checkpoints every checkpoint interval and at the end (without checkpoint.every only when stopped by a
+        signal: a run that asked for no checkpoints leaves none in its directory).  SIGTERM/SIGUSR1 stop the run at the next stop
         check (every STOP_CHECK_EVERY steps, all ranks at the same step) with one final
         output step and checkpoint; `stopped_by` then names the signal.  A divergence found by
         the run monitor (pdemfem.monitor, checked at the same points) writes the output step, a

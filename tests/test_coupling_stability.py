@@ -10,13 +10,13 @@ lumped/consistent mass, restitution, friction, DEM dt up to the automatic step, 
 * the total energy (particles + solid + dissipated) never rises above its start by more than velocity
   Verlet's error on the resting contact's oscillation, (omega_c dt)^2 / 4 of its energy scale m g delta
   (omega_c the resting contact's frequency);
-* the largest nodal speed at the end is not above the one at the first sample (no growth);
+* the largest nodal speed at the end is not above the largest of the run's first half (no growth);
 * the sphere stays at the Hertz rest overlap within 1 % (the block's local sag under the sphere, ~2e-4
   of the overlap, is the deviation measured).
 """
 import pytest
 
-from stability_cases import LevelEnergy, resting_scene, run_resting, verlet_energy_bound
+from stability_cases import GRAVITY, LevelEnergy, resting_scene, run_resting, verlet_energy_bound
 
 CASES = {
     "P1-8-e0.2": dict(cells=8),
@@ -40,8 +40,11 @@ def test_resting_sphere_neither_gains_energy_nor_shakes_the_block(tmp_path, name
     result = run_resting(resting_scene(**options), str(tmp_path))
     bound = verlet_energy_bound(result["dt"])
     assert max(result["energy_change"]) <= bound, (name, result["energy_change"], bound)
+    # The block's own modes are undamped, so its largest nodal speed beats between samples (1.25-2.56e-3 m/s in
+    # the e = 0.9 case, the same with or without the contact springs over the sub-steps): growth is a final
+    # speed above everything the first half of the run saw (the pumping fixed here rose 2.6e-3 -> 7.0e-3).
     speeds = result["largest_nodal_speed"]
-    assert speeds[-1] <= speeds[0], (name, speeds)
+    assert speeds[-1] <= max(speeds[:len(speeds) // 2]), (name, speeds)
     assert all(abs(ratio - 1.0) <= 0.01 for ratio in result["overlap_ratio"]), (name, result["overlap_ratio"])
 
 
@@ -220,3 +223,66 @@ def test_dt_auto_takes_the_step_a_yielding_surface_allows(tmp_path):
         if step % 100 == 99:
             speeds.append(float(np.abs(block.velocities).max()))
     assert speeds[-1] < speeds[0], speeds
+
+
+def soft_block_rest_scene(element: str, end: float) -> dict:
+    """A sphere (R = 0.03 m, E = 5e7) resting undamped (e = 1, friction 0.4) at its Hertz overlap on a block as
+    soft (E = 5e7) meshed 2 x 2 x 1: with the automatic step the block takes 2 (P1) or 4 (P2) FE sub-steps per
+    DEM step, and the contact's elastic force was held over them."""
+    return {"time": {"end": end, "dt": "auto"}, "gravity": [0.0, 0.0, -GRAVITY],
+            "materials": {"ball": {"density": 2500.0, "youngs_modulus": 5e7, "poisson_ratio": 0.25},
+                          "block": {"density": 2700.0, "youngs_modulus": 5e7, "poisson_ratio": 0.33}},
+            "interactions": {"default": {"model": "hertz_mindlin", "restitution": 1.0, "friction": 0.4}},
+            "particles": [{"name": "ball", "material": "ball", "radius": SOFT_RADIUS,
+                           "insert": {"kind": "list", "positions": [[0.0637, 0.0651, SOFT_TOP + SOFT_RADIUS
+                                                                     - soft_rest_overlap()]]}}],
+            "solids": [{"name": "block", "mesh": {"box": [[0, 0, 0], [0.12, 0.12, SOFT_TOP]], "cells": [2, 2, 1]},
+                        "material": "block", "element": element, "fixed": ["zmin"], "contact": ["zmax"]}]}
+
+
+SOFT_RADIUS, SOFT_TOP = 0.03, 0.06
+
+
+def soft_contact():
+    """(mass, effective modulus, rest overlap) of the soft-block case."""
+    import math
+
+    mass = 4.0 / 3.0 * math.pi * SOFT_RADIUS ** 3 * 2500.0
+    modulus = 1.0 / ((1 - 0.25 ** 2) / 5e7 + (1 - 0.33 ** 2) / 5e7)
+    overlap = (mass * GRAVITY / (4.0 / 3.0 * modulus * math.sqrt(SOFT_RADIUS))) ** (2.0 / 3.0)
+    return mass, modulus, overlap
+
+
+def soft_rest_overlap() -> float:
+    return soft_contact()[2]
+
+
+@pytest.mark.parametrize("element", ["P1", "P2"])
+def test_undamped_rest_on_a_substepped_soft_block_keeps_its_energy(tmp_path, element):
+    """The elastic contact force held over the FE sub-steps answers the surface nodes' own motion late: a spring
+    with a lag, which pumped energy into the block (measured before the contact springs over the sub-steps,
+    coupling/dampers.py: P1 total energy +1.5e-2 m g delta at 1 s (5x the bound below), +0.21 at 2 s, +3.0 at 3 s, largest nodal
+    speed 1.3e-3 -> 9.3e-3 m/s; P2 +56 m g delta at 1 s).  Now the total energy stays within velocity Verlet's
+    error on the resting contact's oscillation, (omega_c dt)^2 / 4 of m g delta (omega_c^2 = S_n / m, the contact
+    against the rigid limit: the yielding block only lowers it), and the block does not ring up."""
+    import math
+
+    import numpy as np
+
+    from pdemfem import Simulation
+
+    sim = Simulation.from_dict(soft_block_rest_scene(element, 1.0), output_dir=str(tmp_path / "out"))
+    mass, modulus, overlap = soft_contact()
+    omega = math.sqrt(2.0 * modulus * math.sqrt(SOFT_RADIUS * overlap) / mass)
+    bound = (omega * sim.dt) ** 2 / 4.0 * mass * GRAVITY * overlap
+    block = sim.solids["block"]
+    energy0 = sim.total_energy()
+    steps = int(round(1.0 / sim.dt))
+    changes, speeds = [], []
+    for sample in range(1, 5):
+        sim.step(steps * sample // 4 - sim.step_count)
+        changes.append(sim.total_energy() - energy0)
+        speeds.append(float(np.abs(block.velocities).max()))
+    assert sim.coupling.fem_substeps["block"] >= 2  # the case needs sub-steps
+    assert max(changes) <= bound, (element, [c / bound for c in changes])
+    assert speeds[-1] <= max(speeds[:len(speeds) // 2]), (element, speeds)  # as in the map above

@@ -133,12 +133,14 @@ def test_coarse_step_stops_with_exit_3_and_names_the_limits(capsys, workdir):
     assert float(rows[-1]["kinetic_energy"]) < 1.0
 
 
-def test_sphere_started_behind_a_plane_stops_at_step_0(capsys, workdir):
+def test_sphere_started_behind_a_plane_is_a_scene_error(capsys, workdir):
+    """The validation refuses it before anything is written (it used to run and be stopped at step 0 by the
+    run monitor, and before that guard the sphere was shot out)."""
     code, _, err = run_cli(capsys, workdir, BEHIND_PLANE)
-    assert code == 3, err
-    assert "run stopped at step 0" in err
-    assert "starts partly behind or inside wall 'floor'" in err
-    assert len(history(workdir)) == 1  # step 0 only; before the guard the sphere was shot out
+    assert code == 2, err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert "behind plane wall 'floor'" in err, err
+    assert not (workdir / "out").exists()
 
 
 def test_overflowing_velocity_stops_with_explicit_dt_and_is_refused_with_dt_auto(capsys, workdir):

@@ -12,6 +12,7 @@ from numba import njit
 
 from pdemfem.contact.geometry import no_pull_off
 from pdemfem.contact.layout import EFFECTIVE_MODULUS, NORMAL_PARAMETERS
+from pdemfem.errors import SceneError
 
 NAME = "linear_spring_dashpot"
 CODE = 1
@@ -24,6 +25,12 @@ CHARACTERISTIC_SPEED = NORMAL_PARAMETERS + 2  # v [m/s] of the derived stiffness
 
 
 def parameters(interaction, effective_modulus: float, characteristic_speed: float) -> tuple:
+    if not interaction.normal_stiffness and not characteristic_speed > 0.0:
+        # k_n = m* v^2 / delta_max^2 goes to 0 with v: the contact would have no stiffness at all.
+        raise SceneError("interactions (model linear_spring_dashpot)",
+                         "the spring's stiffness is derived from the expected impact speed, and this scene has none "
+                         "(no initial velocities, no moving walls, nothing above a wall to fall): it would be 0",
+                         "give the interaction a normal_stiffness [N/m], or set time.expected_impact_speed [m/s]")
     return (interaction.normal_stiffness or 0.0, interaction.tangential_stiffness_ratio, characteristic_speed)
 
 

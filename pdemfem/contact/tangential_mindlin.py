@@ -34,6 +34,10 @@ def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, damping, friction_lim
     xi_z = history[row, column + 2]
     if xi_x != 0.0 or xi_y != 0.0 or xi_z != 0.0:
         xi_x, xi_y, xi_z = turn_into_tangent_plane(xi_x, xi_y, xi_z, nx, ny, nz)
+    # The spring's force at the start of the step (for the work below).
+    start_x = -stiffness * xi_x
+    start_y = -stiffness * xi_y
+    start_z = -stiffness * xi_z
     xi_x += tx * dt
     xi_y += ty * dt
     xi_z += tz * dt
@@ -59,6 +63,13 @@ def force(nx, ny, nz, vx, vy, vz, normal_speed, stiffness, damping, friction_lim
     history[row, column + 1] = xi_y
     history[row, column + 2] = xi_z
     energy = 0.5 * stiffness * (xi_x * xi_x + xi_y * xi_y + xi_z * xi_z)
-    # Work taken from the relative motion minus what the spring holds now.
-    return fx, fy, fz, damping, energy, -(fx * tx + fy * ty + fz * tz) * dt - energy
+    # Work taken from the relative motion minus what the spring holds now.  The spring's force goes from its
+    # value at the start of the step to the new one while the contact point moves by v_t dt: the trapezoid of
+    # the two (velocity Verlet's own work on a spring).  The end value alone booked S_t |v_t dt|^2 / 2 a step
+    # of a sticking spring as dissipated energy (first order in dt: a closed box of 27 grains, e = 1, friction
+    # 0.5, gained 3 % of its energy in the books at the automatic step).  The dashpot's part is -c v_t.
+    mean_x = 0.5 * (start_x + fx) - 0.5 * damping * tx
+    mean_y = 0.5 * (start_y + fy) - 0.5 * damping * ty
+    mean_z = 0.5 * (start_z + fz) - 0.5 * damping * tz
+    return fx, fy, fz, damping, energy, -(mean_x * tx + mean_y * ty + mean_z * tz) * dt - energy
 

@@ -29,6 +29,26 @@ Energy.  The dissipated energy the contact kernel booked with s_prev is correcte
 work the dashpots actually did: on the particle dt F_d · u_p with F_d = -C (u_p - v̄_cur),
 on the solid the dashpot impulse times the step's midpoint displacement per damped node
 (kernels.apply_contact_dampers, summed in Solid.damper_work_local).
+
+Contact springs over the sub-steps.  The elastic force held over the solid's FE sub-steps is the
+force of the surface at the start of the advance: to the surface nodes it is a contact spring
+that answers their own motion one advance late, on average (s - 1)/(2 s) of it for s sub-steps.
+Like the delayed dashpot, that lag feeds energy into the surface's modes: a sphere resting
+without damping on a soft, coarsely meshed block (2 sub-steps) made the energy grow e-fold every
+~0.4 s, and every finer or stiffer case drifted upward more slowly.  A linear model (particle,
+contact spring, node on an FE spring) shows it for every sub-step count > 1, at a rate growing
+with S_n h^2 / m.  So the record carries the contact's stiffness S = S_n n n^T + S_t (I - n n^T) (S_t while it
+sticks), and each node k of
+its triangle gets the spring w_k S on its own displacement since the start of the
+advance, at every sub-step (Solid: the contact springs; nothing changes with one sub-step, where
+that displacement is zero).  The model is then stable to round-off for contacts resolved by the
+DEM step (omega dt <= 0.2) at any sub-step count and mass ratio.  The particle receives the
+opposite impulse after the advance: S sum_k w_k A_k at the contact point (times the record's share of the
+window), A_k = the time integral of node k's displacement since the start of the advance over
+its sub-steps, gathered with the surface: momentum stays exact.  A solid with `motion` keeps the
+held force alone (its nodes' displacements are in the moving frame), and so does a window of
+several DEM steps (fem_every > 1: the particles move on against the frozen surface; the held
+force's own limit S_n h^2 / (4 m) <= 1 sets the window, pdemfem.coupling.check).
 """
 from __future__ import annotations
 
@@ -38,15 +58,16 @@ from numba import njit
 from pdemfem.walls.triangle_contact import DAMPING_RECORD_COLUMNS
 
 # A record: particle index, particle id, triangle, weights (3), then the kernel's dashpot record
-# (c_n, c_t, normal (3), lever, particle contact-point velocity (3), surface velocity (3)).
+# (c_n, c_t, normal (3), lever, particle contact-point velocity (3), surface velocity (3), normal stiffness).
 RECORD_INDEX, RECORD_ID, RECORD_TRIANGLE, RECORD_WEIGHTS = 0, 1, 2, 3
 RECORD_DAMPING = 6
 RECORD_COLUMNS = RECORD_DAMPING + DAMPING_RECORD_COLUMNS
+RECORD_STIFFNESS = RECORD_DAMPING + 12  # S_n, then S_t (0 when sliding)
 
 
 def make_records(particles, ids, triangles, weights, damping) -> np.ndarray:
-    """Pack one step's contacts (only those with a dashpot) into (n, RECORD_COLUMNS) float rows."""
-    active = (damping[:, 0] != 0.0) | (damping[:, 1] != 0.0)
+    """Pack one step's contacts (those with a dashpot or a normal stiffness) into (n, RECORD_COLUMNS) float rows."""
+    active = (damping[:, 0] != 0.0) | (damping[:, 1] != 0.0) | (damping[:, 12] != 0.0) | (damping[:, 13] != 0.0)
     if not np.any(active):
         return np.zeros((0, RECORD_COLUMNS))
     rows = np.empty((int(active.sum()), RECORD_COLUMNS))
@@ -72,15 +93,33 @@ def _dashpot_times(record, x, y, z):
 
 
 @njit(cache=True)
-def node_dampers(records, triangles, scale, tensors, targets, previous_forces):
+def node_dampers(records, triangles, scale, tensors, targets, previous_forces, springs):
     """Spread the records' dashpots onto the triangles' vertices (scaled by `scale`).
 
     tensors[v] += scale w C (xx, yy, zz, yz, xz, xy), targets[v] += scale w C u_p and
     previous_forces[v] += scale w C (u_p - s_prev): the dashpot part of the counter-force the
-    DEM step already spread, which the solid now gets from the nodal dashpots instead."""
+    DEM step already spread, which the solid now gets from the nodal dashpots instead.
+    springs[v] += scale w (S_n n n^T + S_t (I - n n^T)) (xx, yy, zz, yz, xz, xy), the contact springs over the
+    sub-steps (module docstring); springs with no rows: none."""
+    with_springs = springs.shape[0] > 0
     for r in range(records.shape[0]):
         record = records[r]
         t = int(record[RECORD_TRIANGLE])
+        if with_springs:
+            tangential = scale * record[RECORD_STIFFNESS + 1]
+            along = scale * record[RECORD_STIFFNESS] - tangential
+            sx = record[RECORD_DAMPING + 2]
+            sy = record[RECORD_DAMPING + 3]
+            sz = record[RECORD_DAMPING + 4]
+            for k in range(3):
+                vertex = triangles[t, k]
+                w = record[RECORD_WEIGHTS + k]
+                springs[vertex, 0] += w * (tangential + along * sx * sx)
+                springs[vertex, 1] += w * (tangential + along * sy * sy)
+                springs[vertex, 2] += w * (tangential + along * sz * sz)
+                springs[vertex, 3] += w * along * sy * sz
+                springs[vertex, 4] += w * along * sx * sz
+                springs[vertex, 5] += w * along * sx * sy
         cn = record[RECORD_DAMPING]
         ct = record[RECORD_DAMPING + 1]
         nx = record[RECORD_DAMPING + 2]
@@ -110,28 +149,65 @@ def node_dampers(records, triangles, scale, tensors, targets, previous_forces):
             previous_forces[vertex, 2] += w * pz
 
 
+@njit(inline="always", cache=True)
+def _at_contact_point(record, triangle, vertex_values):
+    """A per-vertex 3-vector interpolated at the record's contact point (its triangle's weights)."""
+    x = 0.0
+    y = 0.0
+    z = 0.0
+    for k in range(3):
+        w = record[RECORD_WEIGHTS + k]
+        x += w * vertex_values[triangle[k], 0]
+        y += w * vertex_values[triangle[k], 1]
+        z += w * vertex_values[triangle[k], 2]
+    return x, y, z
+
+
+@njit(inline="always", cache=True)
+def _kick_at_contact_point(record, i, jx, jy, jz, velocities, angular_velocities, mass, inverse_inertia):
+    """Particle i takes the impulse j at the record's contact point, lever * n below its centre (and its moment)."""
+    inverse_mass = 1.0 / mass[i]
+    velocities[i, 0] += jx * inverse_mass
+    velocities[i, 1] += jy * inverse_mass
+    velocities[i, 2] += jz * inverse_mass
+    lever = record[RECORD_DAMPING + 5]
+    nx = record[RECORD_DAMPING + 2]
+    ny = record[RECORD_DAMPING + 3]
+    nz = record[RECORD_DAMPING + 4]
+    angular_velocities[i, 0] += -lever * (ny * jz - nz * jy) * inverse_inertia[i]
+    angular_velocities[i, 1] += -lever * (nz * jx - nx * jz) * inverse_inertia[i]
+    angular_velocities[i, 2] += -lever * (nx * jy - ny * jx) * inverse_inertia[i]
+
+
 @njit(cache=True)
 def balance_particles(records, local_index, triangles, vertex_velocities, dt, velocities, angular_velocities, mass,
-                      inverse_inertia):
+                      inverse_inertia, spring_integrals, spring_scale):
     """Give each record's particle (local_index[r] >= 0) the impulse dt C (v̄_cur - s_prev) at its contact
-    point; vertex_velocities are the mean velocities over the advance just done.
+    point; vertex_velocities are the mean velocities over the advance just done.  With spring_integrals
+    (per vertex, the time integral of its displacement since the start of the advance over its sub-steps;
+    no rows: none) also the contact spring's opposite impulse spring_scale S sum_k w_k A_k at the contact point,
+    S = S_n n n^T + S_t (I - n n^T).
     Returns the correction of the booked dissipation, sum dt [u_p·C(u_p - v̄_cur) - r·C r], r = u_p - s_prev."""
     dissipation = 0.0
+    with_springs = spring_integrals.shape[0] > 0
     for r in range(records.shape[0]):
         i = local_index[r]
         if i < 0:
             continue
         record = records[r]
         t = int(record[RECORD_TRIANGLE])
-        cx = 0.0
-        cy = 0.0
-        cz = 0.0
-        for k in range(3):
-            vertex = triangles[t, k]
-            w = record[RECORD_WEIGHTS + k]
-            cx += w * vertex_velocities[vertex, 0]
-            cy += w * vertex_velocities[vertex, 1]
-            cz += w * vertex_velocities[vertex, 2]
+        if with_springs and (record[RECORD_STIFFNESS] != 0.0 or record[RECORD_STIFFNESS + 1] != 0.0):
+            nx = record[RECORD_DAMPING + 2]
+            ny = record[RECORD_DAMPING + 3]
+            nz = record[RECORD_DAMPING + 4]
+            ax, ay, az = _at_contact_point(record, triangles[t], spring_integrals)
+            tangential = spring_scale * record[RECORD_STIFFNESS + 1]
+            along = (spring_scale * record[RECORD_STIFFNESS] - tangential) * (nx * ax + ny * ay + nz * az)
+            jx = tangential * ax + along * nx
+            jy = tangential * ay + along * ny
+            jz = tangential * az + along * nz
+            _kick_at_contact_point(record, i, jx, jy, jz, velocities, angular_velocities, mass, inverse_inertia)
+        cx, cy, cz = _at_contact_point(record, triangles[t], vertex_velocities)
         ux = record[RECORD_DAMPING + 6]
         uy = record[RECORD_DAMPING + 7]
         uz = record[RECORD_DAMPING + 8]
@@ -139,21 +215,8 @@ def balance_particles(records, local_index, triangles, vertex_velocities, dt, ve
         sy = record[RECORD_DAMPING + 10]
         sz = record[RECORD_DAMPING + 11]
         jx, jy, jz = _dashpot_times(record, cx - sx, cy - sy, cz - sz)
-        jx *= dt
-        jy *= dt
-        jz *= dt
-        inverse_mass = 1.0 / mass[i]
-        velocities[i, 0] += jx * inverse_mass
-        velocities[i, 1] += jy * inverse_mass
-        velocities[i, 2] += jz * inverse_mass
-        # Moment about the centre of the impulse at the contact point, lever * n below the centre.
-        lever = record[RECORD_DAMPING + 5]
-        nx = record[RECORD_DAMPING + 2]
-        ny = record[RECORD_DAMPING + 3]
-        nz = record[RECORD_DAMPING + 4]
-        angular_velocities[i, 0] += -lever * (ny * jz - nz * jy) * inverse_inertia[i]
-        angular_velocities[i, 1] += -lever * (nz * jx - nx * jz) * inverse_inertia[i]
-        angular_velocities[i, 2] += -lever * (nx * jy - ny * jx) * inverse_inertia[i]
+        _kick_at_contact_point(record, i, dt * jx, dt * jy, dt * jz, velocities, angular_velocities, mass,
+                               inverse_inertia)
         fx, fy, fz = _dashpot_times(record, ux - cx, uy - cy, uz - cz)
         rx, ry, rz = _dashpot_times(record, ux - sx, uy - sy, uz - sz)
         dissipation += dt * (ux * fx + uy * fy + uz * fz

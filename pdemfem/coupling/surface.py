@@ -125,6 +125,7 @@ class CoupledSurface(kinds.StateComponent):
         # and those of the advance in progress (balanced on the particles after it).
         self.damper_records = []
         self._advanced_records = np.zeros((0, RECORD_COLUMNS))
+        self._advanced_spring_scale = 1.0  # the records' share of the advance (send_forces_to_solid's scale)
         self.particle_system = None  # set by the simulation: the dashpot balance acts on its particles
         self.dissipation_correction_local = 0.0  # [J], this rank's contacts (dampers.balance_particles)
         # Heat: only when the solid conducts (Solid.heat); the particles' side decides whether contacts conduct.
@@ -203,14 +204,23 @@ class CoupledSurface(kinds.StateComponent):
         if dampers and len(records) and self.frame is not None:
             self._remove_frame_velocity(records, interval)
         self._advanced_records = records if dampers else records[:0]
+        self._advanced_spring_scale = scale
         if dampers and len(records):
             tensors = np.zeros((len(self.node_indices), 6))
             targets = np.zeros((len(self.node_indices), 3))
             previous_forces = np.zeros((len(self.node_indices), 3))
-            node_dampers(records, self.triangles, scale, tensors, targets, previous_forces)
+            # The contact springs over the sub-steps (dampers.py), for an advance of one DEM step: over a window of
+            # several (fem_every > 1) the particles move too and the held force has its own limit (check.py); a
+            # solid with motion keeps the held force alone.
+            springs = np.zeros((len(self.node_indices) if self.frame is None and steps == 1 else 0, 6))
+            node_dampers(records, self.triangles, scale, tensors, targets, previous_forces, springs)
             forces -= previous_forces
-            damped = np.flatnonzero(np.any(tensors != 0.0, axis=1))
-            self.solid.add_contact_dampers(self.node_indices[damped], tensors[damped], targets[damped])
+            damped = np.any(tensors != 0.0, axis=1)
+            if len(springs):
+                damped |= np.any(springs != 0.0, axis=1)
+            damped = np.flatnonzero(damped)
+            self.solid.add_contact_dampers(self.node_indices[damped], tensors[damped], targets[damped],
+                                           springs[damped] if len(springs) else None)
         loaded = np.flatnonzero(np.any(forces != 0.0, axis=1))
         self.solid.add_nodal_forces(self.node_indices[loaded], forces[loaded])
         self.accumulated_forces[:] = 0.0
@@ -254,12 +264,25 @@ class CoupledSurface(kinds.StateComponent):
                 records = np.concatenate([records[local_index >= 0], shared])
                 local_index = np.concatenate([local_index[local_index >= 0],
                                               self._local_index(shared, state, by_id_only=True)])
+        spring_integrals = self._spring_integrals()
         if len(records):
             vertex_velocities = (self.triangle_surface.vertex_velocities if self.frame is None
                                  else self._relative_vertex_velocities)
             self.dissipation_correction_local += balance_particles(
                 records, local_index, self.triangles, vertex_velocities, dt,
-                state.velocities, state.angular_velocities, state.mass, state.inverse_inertia)
+                state.velocities, state.angular_velocities, state.mass, state.inverse_inertia,
+                spring_integrals, self._advanced_spring_scale)
+
+    def _spring_integrals(self) -> np.ndarray:
+        """Collective (on every rank alike: the sub-step count is the solid's): per vertex, the time integral of
+        its displacement since the start of the advance just done (Solid.spring_integral_vec), for the rows this
+        rank mirrors; no rows when the solid took one sub-step (the integral is zero) or moves with a frame."""
+        if self.frame is not None or not self.solid.springs_integrated:
+            return np.zeros((0, 3))
+        gather = self.selection.gather if self.selection is not None else self.solid.contact_surface().whole
+        integrals = np.zeros((len(self.node_indices), 3))
+        integrals[gather.rows] = gather.vector(self.solid.spring_integral_vec)
+        return integrals
 
     @staticmethod
     def _local_index(records, state, by_id_only: bool = False) -> np.ndarray:
@@ -294,7 +317,12 @@ class CoupledSurface(kinds.StateComponent):
 
     def restore_records(self, rows, comm) -> None:
         """Records from a checkpoint: rank 0 keeps them all, the next advance shares them (exchange)."""
-        rows = np.asarray(rows, dtype=float).reshape(-1, RECORD_COLUMNS)
+        rows = np.asarray(rows, dtype=float)
+        if rows.size and (rows.ndim != 2 or rows.shape[1] != RECORD_COLUMNS):
+            raise kinds.StateMismatch(f"solid '{self.name}': the checkpoint's contact records have {rows.shape[-1]} "
+                                      f"columns, this version writes {RECORD_COLUMNS} (a checkpoint of an older "
+                                      f"version, taken with contacts on the surface)")
+        rows = rows.reshape(-1, RECORD_COLUMNS)
         self.damper_records = [rows.copy()] if len(rows) and comm.rank == 0 else []
 
     # ------------------------------------------------------------ checkpoints

@@ -276,6 +276,44 @@ def central_difference_update(u, v, acceleration, internal, base_load, nodal_loa
 
 
 @njit(cache=True)
+def contact_spring_forces(u, damped_nodes, dampers, spring_rows, start, integral, dt, nodal_load):
+    """The contact springs' forces -S (u - u0) at the current displacement (flat dof arrays), added to nodal_load
+    and returned per spring (len(spring_rows), 3); integral += dt (u - u0), the time integral over the sub-steps
+    (the particles' balancing impulse, coupling/dampers.py).  dampers[row, 9:15] = S (xx, yy, zz, yz, xz, xy)."""
+    forces = np.empty((spring_rows.shape[0], 3))
+    for k in range(spring_rows.shape[0]):
+        row = spring_rows[k]
+        node = damped_nodes[row]
+        s = dampers[row]
+        dx = u[3 * node] - start[k, 0]
+        dy = u[3 * node + 1] - start[k, 1]
+        dz = u[3 * node + 2] - start[k, 2]
+        integral[k, 0] += dt * dx
+        integral[k, 1] += dt * dy
+        integral[k, 2] += dt * dz
+        fx = -(s[9] * dx + s[14] * dy + s[13] * dz)
+        fy = -(s[14] * dx + s[10] * dy + s[12] * dz)
+        fz = -(s[13] * dx + s[12] * dy + s[11] * dz)
+        forces[k, 0] = fx
+        forces[k, 1] = fy
+        forces[k, 2] = fz
+        nodal_load[3 * node] += fx
+        nodal_load[3 * node + 1] += fy
+        nodal_load[3 * node + 2] += fz
+    return forces
+
+
+@njit(cache=True)
+def remove_nodal_forces(nodes, forces, nodal_load):
+    """nodal_load at `nodes` -= forces (a sub-step's spring forces taken out of the held loads again)."""
+    for k in range(nodes.shape[0]):
+        node = nodes[k]
+        nodal_load[3 * node] -= forces[k, 0]
+        nodal_load[3 * node + 1] -= forces[k, 1]
+        nodal_load[3 * node + 2] -= forces[k, 2]
+
+
+@njit(cache=True)
 def apply_contact_dampers(u, v, acceleration, lumped_mass, constrained, damped_nodes, dampers, dt, decay, gain):
     """Implicit nodal dashpots of particle contacts, after a central-difference step (flat dof arrays).
 
@@ -297,6 +335,12 @@ def apply_contact_dampers(u, v, acceleration, lumped_mass, constrained, damped_n
     for k in range(damped_nodes.shape[0]):
         node = damped_nodes[k]
         d = dampers[k]
+        idle = True  # a node with a contact spring only: (m v) / m would round v
+        for column in range(9):
+            if d[column] != 0.0:
+                idle = False
+        if idle:
+            continue
         tensor[0, 0] = d[0]
         tensor[1, 1] = d[1]
         tensor[2, 2] = d[2]

@@ -43,7 +43,9 @@ MASS_SOLVE_PREFIX = "fem_mass_"
 # (omega dt < 1e-2) that is ~1e-6, so 1e-8 keeps the solve below the integrator's own error.
 MASS_SOLVE_RTOL = 1e-8
 BLOWUP_CHECK_EVERY = 16  # steps between the (cheap, one norm) divergence checks
-DAMPER_COLUMNS = 9  # a node's contact dashpot: symmetric D (6) and target g (3), force g - D v
+# A node's contact dashpot, symmetric D (6) and target g (3), force g - D v; then its contact spring over the
+# sub-steps, symmetric S (6), force -S (u - u0) with u0 its displacement at the start of the advance.
+DAMPER_COLUMNS = 15
 
 
 def _sum(comm, value: float) -> float:
@@ -138,6 +140,15 @@ class Solid(kinds.StateComponent):
         self.damper_vec.zeroEntries()
         self._damped_nodes = np.zeros(0, dtype=np.int64)
         self._dampers = np.zeros((0, DAMPER_COLUMNS))
+        # The contact springs of the advance in progress (coupling/dampers.py): their rows among the damped nodes,
+        # the displacements at the start of the advance, and the time integral of the displacement since then over
+        # the sub-steps (per owned node in spring_integral_vec after the advance, gathered by the coupled surface).
+        self._spring_rows = np.zeros(0, dtype=np.int64)
+        self._spring_start = np.zeros((0, 3))
+        self._spring_integral = np.zeros((0, 3))
+        self.spring_integral_vec = self.stiffness.createVecRight()
+        self.spring_integral_vec.zeroEntries()
+        self.springs_integrated = False  # the last advance took several sub-steps (same on every rank)
         self._lumped_mass_values = self.lumped_mass.getArray(readonly=True).copy()
         self.damper_work_local = 0.0  # work of the contact dashpots on this rank's nodes since construction [J]
         self._base_load_vec = self.stiffness.createVecRight()  # constant + thermal
@@ -300,19 +311,23 @@ class Solid(kinds.StateComponent):
         """Collective: the explicit heat scheme's stability limit 2 / lambda_max(C^-1 (K + H)) [s] (a lower bound)."""
         return self._heat_or_error().critical_time_step()
 
-    def add_contact_dampers(self, global_node_indices, tensors, targets) -> None:
+    def add_contact_dampers(self, global_node_indices, tensors, targets, springs=None) -> None:
         """Not collective: add contact dashpots acting in the next step/advance (then cleared).
 
         The dashpot force on node k is g_k - D_k v_k with D_k (n, 6) symmetric (xx, yy, zz, yz, xz, xy)
         [N s/m] and g_k (n, 3) [N]; it is integrated implicitly at every FE sub-step
         (kernels.apply_contact_dampers).  World components; a solid with motion turns D and g into its
-        frame (the velocity they act on is then the elastic velocity relative to the frame)."""
+        frame (the velocity they act on is then the elastic velocity relative to the frame).  springs (n, 6):
+        symmetric S_k of a contact spring on the node's displacement since the start of the advance, over its
+        sub-steps (coupling/dampers.py; world components, for solids without motion)."""
         indices = np.asarray(global_node_indices, dtype=PETSc.IntType).ravel()
         if len(indices) and self.frame is not None:
             tensors = self.frame.symmetric_to_body(np.asarray(tensors, float).reshape(-1, 6), self.time)
             targets = self.frame.vectors_to_body(np.asarray(targets, float).reshape(-1, 3), self.time)
         if len(indices):
-            values = np.hstack([np.asarray(tensors, float).reshape(-1, 6), np.asarray(targets, float).reshape(-1, 3)])
+            springs = np.zeros((len(indices), 6)) if springs is None else np.asarray(springs, float).reshape(-1, 6)
+            values = np.hstack([np.asarray(tensors, float).reshape(-1, 6), np.asarray(targets, float).reshape(-1, 3),
+                                springs])
             self.damper_vec.setValuesBlocked(indices, values.ravel(), PETSc.InsertMode.ADD_VALUES)
 
     def _gather_dampers(self) -> None:
@@ -437,11 +452,31 @@ class Solid(kinds.StateComponent):
         dt = interval / substeps
         self.nodal_force_vec.assemble()
         self._gather_dampers()
+        # With one sub-step the springs' displacement since the start is zero: nothing to do.
+        self.springs_integrated = substeps > 1
+        if self.springs_integrated:
+            self._start_springs()
         for substep in range(substeps):
             self._advance(dt, clear_nodal=substep == substeps - 1)
+        if self.springs_integrated:
+            self._finish_springs()
         self._damped_nodes = self._damped_nodes[:0]
         self._advance_heat(interval)
         return substeps
+
+    def _start_springs(self) -> None:
+        """The contact springs of this advance: their rows among the damped nodes and their start displacements."""
+        self._spring_rows = np.flatnonzero(np.any(self._dampers[:, 9:15] != 0.0, axis=1))
+        nodes = self._damped_nodes[self._spring_rows]
+        self._spring_start = self.displacement_vec.getArray(readonly=True).reshape(-1, 3)[nodes].copy()
+        self._spring_integral = np.zeros_like(self._spring_start)
+
+    def _finish_springs(self) -> None:
+        """The time integral of each spring node's displacement since the start into spring_integral_vec."""
+        integral = self.spring_integral_vec.getArray().reshape(-1, 3)
+        integral[:] = 0.0
+        integral[self._damped_nodes[self._spring_rows]] = self._spring_integral
+        self._spring_rows = self._spring_rows[:0]
 
     def _advance_heat(self, interval: float) -> None:
         """Collective: temperatures over the interval just covered, then the thermal load they give (the
@@ -483,6 +518,12 @@ class Solid(kinds.StateComponent):
 
     def _advance(self, dt: float, clear_nodal: bool) -> None:
         base_load = self._base_load_vec
+        springs = len(self._spring_rows) > 0
+        if springs:
+            # The contact springs' forces at this sub-step's displacement join the held nodal loads for the step.
+            spring_forces = kernels.contact_spring_forces(
+                self.displacement_vec.getArray(readonly=True), self._damped_nodes, self._dampers, self._spring_rows,
+                self._spring_start, self._spring_integral, dt, self.nodal_force_vec.getArray())
         if self.frame is not None:
             velocity_before = self.velocity_vec.getArray(readonly=True).copy()
             self._compute_frame_load()
@@ -516,6 +557,9 @@ class Solid(kinds.StateComponent):
                                 self.frame.spin_vector(self.time), dt)
             self.frame_work_local += load_work(self._frame_load_vec.getArray(readonly=True), velocity_before,
                                                self.velocity_vec.getArray(readonly=True), self._constrained, dt)
+        if springs and not clear_nodal:
+            kernels.remove_nodal_forces(self._damped_nodes[self._spring_rows], spring_forces,
+                                        self.nodal_force_vec.getArray())
         self._external_work_local += work
         self.time += dt
         self.step_count += 1

@@ -57,8 +57,25 @@ def _names(paths, folder: Path, shown: int = 4) -> str:
     return ", ".join(names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
 
 
+def _not_a_directory(directory: Path, key: str, option: str):
+    """(where, problem, fix) when `directory` or one of its parents exists but is not a directory."""
+    for path in [directory, *directory.parents]:
+        if path.exists() and not path.is_dir():
+            what = "it is" if path == directory else f"its parent {path} is"
+            return (str(directory), f"cannot be the {key}: {what} an existing file, not a directory",
+                    f"give {option} the path of a directory (existing or new), or move the file {path} away")
+        if path.exists():
+            return None
+    return None
+
+
 def _check_on_root(output_dir: Path, checkpoint_dir: Path, restart: bool, force: bool, clear: bool):
     """None, or (where, problem, fix) of the refusal."""
+    for directory, key, option in ((output_dir, "output directory", "-o (or output.dir)"),
+                                   (checkpoint_dir, "checkpoint directory", "checkpoint.dir")):
+        refusal = _not_a_directory(Path(directory), key, option)
+        if refusal is not None:
+            return refusal
     if not restart:
         checkpoints = previous_checkpoints(checkpoint_dir)
         if checkpoints:

@@ -280,8 +280,14 @@ class SimulationIO:
                                   "raise time.end in the scene to continue (time.end may change on a restart "
                                   "without --force)")
         if abs(float(attributes.get("dt", sim.dt)) - sim.dt) > 1e-12 * sim.dt:
-            raise CheckpointError(where, f"written with dt = {attributes['dt']:g} s, this scene has dt = {sim.dt:g} s",
-                                  "restart with the scene's original time step")
+            stored = float(attributes["dt"])
+            given = ("dt: auto gives" if sim.scene.time.dt == "auto" else "time.dt is")
+            raise CheckpointError(
+                where, f"written with dt = {stored!r} s, and this scene's {given} {sim.dt!r} s: the time step is "
+                       f"part of the stored state (step counts, velocities at half steps), so a restart keeps it",
+                f"set time.dt: {stored!r} in the scene (the checkpoint's step, exactly; with --force, since time.dt "
+                f"is physics), or start afresh without --restart")
+        self._refuse_other_particles(where, attributes, force)
         if sorted(attributes.get("solids", [])) != sorted(sim.solids):
             raise CheckpointError(where, f"holds solids {attributes.get('solids')}, the scene has {list(sim.solids)}",
                                   "restart with the scene that wrote the checkpoint")
@@ -301,6 +307,34 @@ class SimulationIO:
         self.restarted_from = checkpoint.path
         self.resume_step = sim.step_count
         self.last_checkpoint = (sim.step_count, checkpoint.path)
+
+
+    def _refuse_other_particles(self, where: str, attributes: dict, force: bool) -> None:
+        """A restart continues the checkpoint's particles as stored: a scene that inserts another number of
+        particles at t = 0 is refused even with --force (the stored state's shape changed, docs/output.md);
+        other changes of the insertion (region, seed, radii with the same count) are warned to have no effect."""
+        sim = self.sim
+        stored_physics = attributes.get("scene_physics")
+        changes = []
+        if isinstance(stored_physics, dict):
+            from pdemfem.scene.loader import physics_changes
+
+            changes = [text for text in physics_changes(stored_physics, scene_physics(sim.scene), limit=1000)
+                       if text.startswith("particles")]
+        inserted = (attributes.get("insertion") or {}).get("inserted")
+        if inserted is not None and int(inserted) != int(sim.inserted_count):
+            listed = "; ".join(changes[:6]) if changes else "the particle groups"
+            raise CheckpointError(
+                where, f"holds the {int(inserted)} particles (spheres) its scene inserted at t = 0, this scene inserts "
+                       f"{int(sim.inserted_count)} ({listed}): a restart continues the checkpoint's particles and "
+                       f"cannot add or remove any, so it is refused even with --force",
+                "restore the particle groups of the scene that wrote the checkpoint (their counts and insertion), "
+                "or start afresh without --restart")
+        insertion_changes = [text for text in changes if ".insert." in text or ".radius" in text
+                             or ".clump" in text or ".initial_temperature" in text]
+        if force and insertion_changes and self.comm.rank == 0:
+            log.warning("restart: the checkpoint's particles are continued as stored (positions, velocities, radii, "
+                        "temperatures); these changes of the scene take no effect: %s", "; ".join(insertion_changes[:6]))
 
 
 # ====================================================================== helpers

@@ -546,11 +546,37 @@ def _effective_shear_modulus(a: MaterialConfig, b: Optional[MaterialConfig]) -> 
                      for m in (a, b) if m is not None)
 
 
-def _pairs(scene: Scene, with_shear: bool = False, with_smaller_radius: bool = False):
-    """(kind, material_a, material_b, m*, R*, E*[, G*][, smaller radius]) for the smallest particle of each pair
-    of groups and each group against each wall and each contact solid."""
+def _pairs(scene: Scene, with_shear: bool = False, with_smaller_radius: bool = False, with_surface: bool = False):
+    """(kind, material_a, material_b, m*, R*, E*[, G*][, smaller radius][, surface]) for the smallest particle of
+    each pair of groups and each group against each wall and each contact solid; `surface`: the wall's or
+    solid's name ('wall floor', 'solid plate'), None for a particle pair."""
     for pair in _pairs_with_radius(scene, with_shear):
-        yield pair if with_smaller_radius else pair[:-1]
+        surface = pair[-1]
+        pair = pair[:-1]
+        pair = pair if with_smaller_radius else pair[:-1]
+        yield pair + (surface,) if with_surface else pair
+
+
+def _merged_surfaces(entries):
+    """[(value, kind, label, partner)] with the entries that differ only in their surface (walls of one material
+    and shape) merged into one, whose label names them all: 'glass on glass (walls floor, x_low)'."""
+    merged = {}
+    for value, kind, label, partner, surface in entries:
+        key = (kind, label, partner, float(f"{value:.6g}"))
+        if key not in merged:
+            merged[key] = [value, kind, label, partner, []]
+        if surface is not None:
+            merged[key][4].append(surface)
+    found = []
+    for value, kind, label, partner, surfaces in merged.values():
+        if surfaces:
+            walls = [name[5:] for name in surfaces if name.startswith("wall ")]
+            solids = [name[6:] for name in surfaces if name.startswith("solid ")]
+            parts = ([("walls " if len(walls) > 1 else "wall ") + ", ".join(walls)] if walls else []) + (
+                [("solids " if len(solids) > 1 else "solid ") + ", ".join(solids)] if solids else [])
+            label = f"{label} ({'; '.join(parts)})"
+        found.append((value, kind, label, partner))
+    return found
 
 
 def _pairs_with_radius(scene: Scene, with_shear: bool):
@@ -566,7 +592,7 @@ def _pairs_with_radius(scene: Scene, with_shear: bool):
             pair = ("particle_particle", name_a, name_b, m_a * m_b / (m_a + m_b), r_a * r_b / (r_a + r_b),
                     _effective_modulus(a, b))
             pair = pair + (_effective_shear_modulus(a, b),) if with_shear else pair
-            yield pair + (min(r_a, r_b),)
+            yield pair + (min(r_a, r_b), None)
         if count_a == 0:
             continue
         # Solids' contact surfaces are walls to the particle (their mass is far larger).
@@ -577,17 +603,18 @@ def _pairs_with_radius(scene: Scene, with_shear: bool):
             # cylinder) walls are taken as flat, R* = r, the shorter contact; the outside of a
             # cylinder (a post) is convex, R* = r R / (r + R).
             r_eff = r_a
+            surface = f"solid {wall.name}" if any(wall is solid for solid in scene.solids) else f"wall {wall.name}"
             if getattr(wall, "kind", "plane") == "cylinder" and not getattr(wall, "inside", True) and wall.radius:
                 r_eff = r_a * wall.radius / (r_a + wall.radius)
             if any(wall is solid for solid in scene.solids) and scene.coupling.contact_modulus == "particle":
                 # The contact tables leave the solid's compliance out (its FE mesh deforms instead).
                 pair = ("particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, None))
                 pair = pair + (_effective_shear_modulus(a, None),) if with_shear else pair
-                yield pair + (r_a,)
+                yield pair + (r_a, surface)
                 continue
             pair = ("particle_wall", name_a, wall.material, m_a, r_eff, _effective_modulus(a, w))
             pair = pair + (_effective_shear_modulus(a, w),) if with_shear else pair
-            yield pair + (r_a,)
+            yield pair + (r_a, surface)
 
 
 def hertz_contact_duration(scene: Scene, speed: float) -> ContactDurations:
@@ -773,6 +800,7 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
                          f"law, so forces and contact times are off; use stiffer materials (youngs_modulus, "
                          f"normal_stiffness) or lower the speed")
     found.extend(start_inside_walls(scene))
+    found = list(dict.fromkeys(found))  # never the same line twice
     thermal = thermal_step_limit(scene)
     if thermal is not None and dt > thermal[0]:
         found.append(f"dt = {dt:.3g} s is above the estimated thermal step limit {thermal[0]:.3g} s of group "
@@ -918,10 +946,15 @@ def thin_surface_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str]]
     found = []
     if speed <= 0.0 or not math.isfinite(speed):
         return found
-    for kind, name_a, name_b, m_eff, r_eff, e_eff in _pairs(scene):
-        if kind == "particle_wall" and name_b in thin:
-            found.append((_peak_overlap(m_eff, r_eff, e_eff, speed) / r_eff, f"{name_a} on {name_b}"))
-    return found
+    surfaces = ({f"wall {wall.name}" for wall in scene.walls if wall.kind == "mesh"}
+                | {f"solid {solid.name}" for solid in scene.solids if solid.contact})
+    entries = []
+    for kind, name_a, name_b, m_eff, r_eff, e_eff, surface in _pairs(scene, with_surface=True):
+        if kind == "particle_wall" and name_b in thin and surface in surfaces:
+            entries.append((_peak_overlap(m_eff, r_eff, e_eff, speed) / r_eff, kind, f"{name_a} on {name_b}", name_b,
+                            surface))
+    # One entry per group and material, naming its surfaces (several walls of one material gave one line each).
+    return [(ratio, label) for ratio, _, label, _ in _merged_surfaces(entries)]
 
 
 def pair_peak_overlap(interaction, m_eff: float, r_eff: float, e_eff: float, speed: float) -> float:
@@ -941,11 +974,14 @@ def contact_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str, str, 
     found = []
     if speed <= 0.0 or not math.isfinite(speed):
         return found
-    for kind, name_a, name_b, m_eff, r_eff, e_eff, smaller in _pairs(scene, with_smaller_radius=True):
+    entries = []
+    for kind, name_a, name_b, m_eff, r_eff, e_eff, smaller, surface in _pairs(scene, with_smaller_radius=True,
+                                                                             with_surface=True):
         overlap = pair_peak_overlap(scene.interaction(name_a, name_b), m_eff, r_eff, e_eff, speed)
         joiner = "-" if kind == "particle_particle" else " on "
-        found.append((overlap / smaller, kind, f"{name_a}{joiner}{name_b}", name_b))
-    return found
+        entries.append((overlap / smaller, kind, f"{name_a}{joiner}{name_b}", name_b, surface))
+    # Walls of one material (a box's five planes) give one entry naming them, not one identical line each.
+    return _merged_surfaces(entries)
 
 
 def _points_behind_wall(group: ParticleGroupConfig, wall: WallConfig, radius: float) -> bool:

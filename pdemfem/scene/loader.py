@@ -96,18 +96,31 @@ def load_scene(source: SceneSource, base_dir: Optional[Union[str, os.PathLike]] 
     except ValidationError as error:
         problems = _translate(error, data)
         raise _scene_error(label, problems, nodes) from None
-    missing = [
-        _Problem(path, f"file not found: {resolve_path(folder, value)}",
-                 "paths in a scene are relative to the scene file's folder; correct the path or add the file")
-        for path, value in _file_keys(scene, ())
-        if not resolve_path(folder, value).is_file()
-    ]
+    missing = [_file_problem(path, resolve_path(folder, value)) for path, value in _file_keys(scene, ())
+               if not resolve_path(folder, value).is_file()]
+    # A generated box mesh has exactly the groups xmin..zmax (and the solid's regions): a misspelt group
+    # is known before any meshing.
+    from pdemfem.scene.inputs import box_mesh_group_problems
+
+    missing += [_Problem(_parse_key_path(key), problem, fix) for key, problem, fix in box_mesh_group_problems(scene)]
     if missing:
         raise _scene_error(label, missing, nodes)
     for group in scene.particles:  # a clump's surface file is read when its shape is first needed
         if group.clump is not None and group.clump.file is not None:
             group.clump._resolved_file = str(resolve_path(folder, group.clump.file))
     return scene, folder
+
+
+def _file_problem(path: KeyPath, resolved: Path) -> "_Problem":
+    """A file key whose path names no regular file: missing, a directory, or something else."""
+    if resolved.is_dir():
+        return _Problem(path, f"{resolved} is a directory, not a file",
+                        f"give the mesh file itself in {format_key_path(path)} (e.g. {resolved}/part.msh); paths "
+                        "in a scene are relative to the scene file's folder")
+    if resolved.exists():
+        return _Problem(path, f"{resolved} is not a regular file", "give the path of a mesh file")
+    return _Problem(path, f"file not found: {resolved}",
+                    "paths in a scene are relative to the scene file's folder; correct the path or add the file")
 
 
 # Keys whose string values name files (relative to the scene file): wall meshes, solid meshes.
@@ -573,6 +586,15 @@ def _one_problem(path: KeyPath, item: dict, data: Any) -> _Problem:
 
 
 def _bound_fix(path: KeyPath, symbol: str, bound) -> str:
+    if path and isinstance(path[-1], int):
+        # An entry of a list (mesh.cells[0], a radius in radii): name the list and the entry, not the bare index.
+        listing = format_key_path(path[:-1])
+        key = format_key_path(path)
+        if symbol == ">" and bound == 0:
+            return f"every entry of {listing} must be positive: give {key} a value > 0"
+        if symbol == ">=" and bound == 0:
+            return f"every entry of {listing} must be zero or more: give {key} a value >= 0"
+        return f"give {key} a value {symbol} {bound:g}" if isinstance(bound, (int, float)) else f"correct {key}"
     name = str(path[-1]) if path else "value"
     if symbol == ">" and bound == 0:
         return f"{name} must be positive (SI units)"

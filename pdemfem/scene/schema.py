@@ -351,7 +351,7 @@ class OutputConfig(StrictModel):
 
 class CheckpointConfig(StrictModel):
     every: Optional[PositiveFloat] = Field(
-        None, description="checkpoint interval [s] (rounded to whole steps); none: only on SIGTERM/SIGUSR1 and at the end")
+        None, description="checkpoint interval [s] (rounded to whole steps), and one at the end; none: only on SIGTERM/SIGUSR1")
     keep: Annotated[int, Field(ge=1)] = Field(2, description="newest checkpoints kept (older ones are deleted)")
     dir: Optional[DirectoryName] = Field(None, description="checkpoint directory; default <output dir>/checkpoints")
 
@@ -429,8 +429,9 @@ class CouplingConfig(StrictModel):
         "auto", description="the particle-solid contact's gap: nearest = the distance to the nearest surface "
                             "point, its force on that triangle's nodes; blended = a smooth blend of the facets "
                             "under the particle, its elastic force spread over their nodes (stable where the "
-                            "surface dimples under the contact; docs/coupling.md); auto = blended for the solids "
-                            "whose surface yields to a point load (S_n/(E l) > 0.5, as check reports), else nearest")
+                            "surface dimples under the contact; docs/coupling.md); auto = blended for P2 solids "
+                            "and for the solids whose surface yields to a point load (S_n/(E l) > 0.5, as check "
+                            "reports), else nearest")
 
 
 class HeatConfig(StrictModel):

@@ -21,6 +21,9 @@ GMSH_SURFACE_TYPES = {"triangle 3": "triangle", "triangle 6": "triangle6", "quad
 def read_surface(path, scale: float = 1.0):
     """(vertices (n, 3) float64, triangles (m, 3) int32) of the triangle cells of a mesh file, times `scale`."""
     path = Path(path)
+    if path.is_dir():
+        raise MeshError(str(path), "is a directory, not a surface mesh file",
+                        "give the mesh file itself (STL, gmsh .msh or .geo), relative to the scene file")
     if not path.is_file():
         raise MeshError(str(path), "surface mesh file not found", "check the path (relative paths start at the scene file)")
     if path.suffix.lower() == ".geo":
@@ -60,12 +63,65 @@ def read_surface(path, scale: float = 1.0):
     return clean_surface(points, triangles)
 
 
+STL_HEADER = 84         # binary STL: an 80-byte header and a uint32 triangle count,
+STL_TRIANGLE = 50       # then 50 bytes per triangle (normal, three corners, attribute word)
+
+
+def stl_problem(path: Path):
+    """None for a plausible STL file, else (problem, fix): a binary STL whose size does not match the
+    triangle count in its header (cut short by an interrupted copy or export), or a file that is neither
+    a binary STL nor text (an ASCII STL starts with 'solid')."""
+    size = path.stat().st_size
+    with open(path, "rb") as handle:
+        head = handle.read(1024)
+    count = int(np.frombuffer(head[80:STL_HEADER], dtype="<u4")[0]) if size >= STL_HEADER else None
+    if count is not None and size == STL_HEADER + STL_TRIANGLE * count:
+        return None  # a whole binary STL (its header may start with 'solid' too)
+    if head.lstrip()[:5].lower() == b"solid":
+        try:
+            head.decode("ascii")
+            return None  # an ASCII STL: meshio reports its own problems
+        except UnicodeDecodeError:
+            pass
+    if size == 0:
+        return "the file is empty (0 bytes)", "export the surface again (STL, gmsh .msh or .geo)"
+    if count is None:
+        return (f"is {size} bytes: too short for a binary STL ({STL_HEADER}-byte header with the triangle count) "
+                f"and not an ASCII STL (which starts with 'solid')", "export the surface again as STL")
+    expected = STL_HEADER + STL_TRIANGLE * count
+    if size < expected and expected > 16 * size:
+        return (f"not an STL file: read as a binary STL its header announces {count} triangles ({expected} bytes), "
+                f"far more than the file's {size} bytes, and it is not an ASCII STL (which starts with 'solid')",
+                "check that this is the right file (a surface mesh saved as STL), or export the surface again")
+    if size < expected:
+        whole = (size - STL_HEADER) // STL_TRIANGLE
+        return (f"a binary STL cut short: its header announces {count} triangles ({expected} bytes) but the file "
+                f"has {size} bytes ({whole} whole triangles)",
+                "the file was truncated (an interrupted copy, download or export): copy or export it again")
+    return (f"not a valid STL: as a binary STL its header announces {count} triangles ({expected} bytes) but the "
+            f"file has {size} bytes, and it is not an ASCII STL (which starts with 'solid')",
+            "check that this is the right file, or export the surface again as STL")
+
+
 def _read_meshio_surface(path: Path):
     """(points, [(meshio cell type, connectivity)]) of a mesh file meshio reads."""
     import meshio
 
+    if path.stat().st_size == 0:
+        raise MeshError(str(path), "the file is empty (0 bytes)",
+                        "export the surface again (STL, gmsh .msh or .geo); an interrupted copy leaves such files")
+    if path.suffix.lower() == ".stl":
+        problem = stl_problem(path)
+        if problem is not None:
+            raise MeshError(str(path), *problem)
     try:
         mesh = meshio.read(path)
+    except UnicodeDecodeError as error:  # a binary file read as text (ASCII STL, .obj, .vtk ...)
+        kind = path.suffix or "no suffix"
+        raise MeshError(str(path), f"cannot read the surface mesh: it is read as a text format ({kind}) but holds "
+                                   f"binary data at byte {error.start}",
+                        "check that the file is the surface mesh its suffix says (re-export it), or give an STL, "
+                        "gmsh .msh or .geo") from None
     except Exception as error:  # meshio raises many kinds; all mean "cannot use this file"
         raise MeshError(str(path), f"cannot read the surface mesh ({type(error).__name__}: {error})",
                         "give an STL, gmsh .msh or .geo, or another meshio-readable surface mesh") from None

@@ -52,8 +52,8 @@ import numpy as np
 from numba import njit
 
 from pdemfem.contact.conduction import contact_conductance
-from pdemfem.contact.layout import HEAT
-from pdemfem.contact.registry import history_layout
+from pdemfem.contact.layout import FRICTION, HEAT, NORMAL_MODEL
+from pdemfem.contact.registry import history_layout, normal_elastic
 from pdemfem.contact.response import (add_particle_loads, history_in_use, pull_off_overlap, released_energy,
                                       rigid_wall_contact)
 
@@ -68,8 +68,10 @@ REGION_VERTEX_C = 6
 # A per-particle slot holds the contact history (pdemfem.contact.registry.history_layout), then the
 # overlap of the last step: slot_history has history width + 1 columns.
 # Columns of a contact's dashpot record: c_n, c_t, normal (3), lever, particle contact-point velocity (3),
-# surface velocity at the contact point (3).
-DAMPING_RECORD_COLUMNS = 12
+# surface velocity at the contact point (3), normal stiffness S_n = dF_n/d(overlap) and tangential stiffness S_t
+# (0 when sliding): the spring a deformable surface applies to its nodes' own motion over its sub-steps
+# (pdemfem.coupling.dampers).
+DAMPING_RECORD_COLUMNS = 14
 
 
 @njit(inline="always", cache=True)
@@ -643,6 +645,17 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 record_damping[contacts, 9] = sx
                 record_damping[contacts, 10] = sy
                 record_damping[contacts, 11] = sz
+                stiffness = normal_elastic(int(coefficients[material_index[i], wall_material, NORMAL_MODEL]),
+                                           composition, radius - distance, coefficients, material_index[i],
+                                           wall_material, mass[i], radius)
+                record_damping[contacts, 12] = max(stiffness[1], 0.0)
+                # The tangential spring while the contact sticks (its force below the Coulomb limit): sliding, the
+                # force does not follow the displacement.
+                normal_part = fx * nx + fy * ny + fz * nz
+                tangential_squared = (fx * fx + fy * fy + fz * fz) - normal_part * normal_part
+                limit = coefficients[material_index[i], wall_material, FRICTION] * max(normal_part, 0.0)
+                sticking = tangential_squared < (1.0 - 1e-9) * limit * limit
+                record_damping[contacts, 13] = max(stiffness[2], 0.0) if sticking else 0.0
             if spread_to_vertices:
                 vertex_forces[a, 0] -= wa * fx
                 vertex_forces[a, 1] -= wa * fy

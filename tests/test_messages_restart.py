@@ -1,0 +1,97 @@
+"""Restart messages and the final checkpoint: a finished run with checkpoint.every leaves one at its end (so
+raising time.end extends it), one without leaves none; a restart refused for a changed dt gives the exact time.dt
+to set, and a changed particle count is refused even with --force (the checkpoint's particles would be used).
+"""
+from __future__ import annotations
+
+import math
+
+import h5py
+import pytest
+
+from pdemfem import cli
+
+# 20 grains on a floor, a checkpoint every 0.0015 s (the end, 0.002 s, is not a multiple).
+SCENE = """\
+time: {end: 0.002, dt: auto, dt_factor: 0.1}
+materials:
+  glass: {density: 2500, youngs_modulus: 5.0e6, poisson_ratio: 0.3}
+particles:
+  - name: grains
+    material: glass
+    radius: 0.001
+    insert:
+      kind: lattice
+      region: {box: [[0, 0, 0], [0.01, 0.01, 0.01]]}
+      count: 20
+walls:
+  - {name: floor, kind: plane, point: [0, 0, 0], normal: [0, 0, 1], material: glass}
+output: {dir: results, every: 0.001}
+checkpoint: {every: 0.0015}
+"""
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """A finished run of SCENE in its own folder."""
+    folder = tmp_path_factory.mktemp("finished")
+    (folder / "scene.yaml").write_text(SCENE)
+    assert cli.main(["run", str(folder / "scene.yaml"), "--quiet"]) == 0
+    return folder
+
+
+def run(capsys, *argv):
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_a_finished_run_leaves_a_final_checkpoint_that_a_later_end_extends(finished, tmp_path, capsys):
+    checkpoints = finished / "results" / "checkpoints"
+    written = sorted(checkpoints.glob("checkpoint_*.h5"))
+    assert len(written) == 2 and (checkpoints / "latest.h5").is_file()  # at 0.0015 s and at the end
+    with h5py.File(checkpoints / "latest.h5", "r") as handle:
+        dt, step = float(handle.attrs["dt"]), int(handle.attrs["step"])
+    assert step == math.ceil(0.002 / dt - 1e-9)  # the last step of the run (Simulation.run)
+    # Extending the run: a later time.end, no --force.
+    longer = tmp_path / "longer.yaml"
+    longer.write_text(SCENE.replace("end: 0.002", "end: 0.003"))
+    code, _, err = run(capsys, "run", longer, "-o", tmp_path / "more", "--quiet", "--restart", checkpoints / "latest.h5")
+    assert code == 0, err
+    assert (tmp_path / "more" / "checkpoints" / "latest.h5").is_file()
+    # Without a checkpoint section a finished run leaves none (its directory holds no checkpoints to protect).
+    plain = tmp_path / "plain.yaml"
+    plain.write_text(SCENE.replace("checkpoint: {every: 0.0015}\n", ""))
+    code, _, err = run(capsys, "run", plain, "-o", tmp_path / "plain", "--quiet")
+    assert code == 0, err
+    assert not list((tmp_path / "plain").glob("checkpoints/*.h5"))
+
+
+def test_changed_dt_auto_gives_the_exact_time_dt_to_set(finished, tmp_path, capsys):
+    latest = finished / "results" / "checkpoints" / "latest.h5"
+    with h5py.File(latest, "r") as handle:
+        stored = float(handle.attrs["dt"])
+    stiffer = tmp_path / "stiffer.yaml"
+    stiffer.write_text(SCENE.replace("end: 0.002", "end: 0.003").replace("youngs_modulus: 5.0e6",
+                                                                         "youngs_modulus: 6.0e6"))
+    code, _, err = run(capsys, "run", stiffer, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
+    assert code == 2, err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert f"fix: set time.dt: {stored!r} in the scene" in err, err
+    assert not (tmp_path / "o").exists()
+    # Following the fix continues the run.
+    stiffer.write_text(stiffer.read_text().replace("dt: auto", f"dt: {stored!r}"))
+    code, _, err = run(capsys, "run", stiffer, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
+    assert code == 0, err
+
+
+def test_changed_particle_count_is_refused_even_with_force(finished, tmp_path, capsys):
+    latest = finished / "results" / "checkpoints" / "latest.h5"
+    fewer = tmp_path / "fewer.yaml"
+    fewer.write_text(SCENE.replace("end: 0.002", "end: 0.003").replace("count: 20", "count: 18"))
+    code, _, err = run(capsys, "run", fewer, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
+    assert code == 2, err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert "holds the 20 particles" in err and "this scene inserts 18" in err, err
+    assert "particles[0].insert.count: 20 -> 18" in err and "refused even with --force" in err
+    assert not (tmp_path / "o").exists()
