@@ -54,9 +54,10 @@ HERTZ_DURATION_FACTOR = 2.868
 DT_PER_CONTACT = 30.0
 # Steps per contact for a 1 % restitution error: STEPS_PER_DAMPING * gamma_lin^1.5 (gamma_lin: the
 # calibrated damping as the linear law's coefficient).  Measured: the mean error over the touch phase
-# falls as 1/N; its 1 % crossing is at 72 gamma^1.5 (e = 0.1), 75 (0.2), 64 (0.5) for the linear law
-# and 55-61 for Hertz (docs/stability.md has the table); 80 keeps the largest, 75, 6 % inside.
-STEPS_PER_DAMPING = 80.0
+# falls as 1/N; its 1 % crossing is at 72 gamma^1.5 (e = 0.1), 75 (0.2), ~80 (0.3, a wall, 24 touch phases:
+# -1.005 % at 80), 64 (0.5) for the linear law and 55-61 for Hertz (docs/stability.md has the table); 90 keeps
+# the largest, ~80, 12 % inside.
+STEPS_PER_DAMPING = 90.0
 # Below this restitution the step is that of e = 0.1: the relative error then grows, but the
 # absolute error e_obtained - e stays below 1 % of 0.1 (it falls as e^(1/4) at a fixed step).
 RESTITUTION_ACCURACY_FLOOR = 0.1
