@@ -73,15 +73,9 @@ def coupling_report(scene, base_dir, dt: float, comm=None, warnings=None, solids
 
 def blended_transfer(scene, solid_name: str, point_loaded: set) -> bool:
     """Whether a solid's contact surface uses the blended gap: coupling.transfer blended, or auto and the
-    surface yields to a point load (`point_loaded`: the solids past POINT_LOAD_LIMIT) or has P2 faces.  On P2
-    faces the nearest point's force, spread by the quadratic face functions, is not the derivative of the gap
-    measured on the flat sub-triangles: an off-centre impact on a free P2 plate gained 2.2 % of its energy
-    whatever the step (dt / 4 alike), where the blended gap kept it within 1e-5."""
+    surface yields to a point load (`point_loaded`: the solids past POINT_LOAD_LIMIT)."""
     transfer = scene.coupling.transfer
-    if transfer != "auto":
-        return transfer == "blended"
-    quadratic = any(config.name == solid_name and config.element == "P2" for config in scene.solids)
-    return solid_name in point_loaded or quadratic
+    return transfer == "blended" or (transfer == "auto" and solid_name in point_loaded)
 
 
 def _contact_figures(scene, config, solid, interval: float, warnings, limits=None, point_loaded=None) -> list:

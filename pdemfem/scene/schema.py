@@ -429,9 +429,8 @@ class CouplingConfig(StrictModel):
         "auto", description="the particle-solid contact's gap: nearest = the distance to the nearest surface "
                             "point, its force on that triangle's nodes; blended = a smooth blend of the facets "
                             "under the particle, its elastic force spread over their nodes (stable where the "
-                            "surface dimples under the contact; docs/coupling.md); auto = blended for P2 solids "
-                            "and for the solids whose surface yields to a point load (S_n/(E l) > 0.5, as check "
-                            "reports), else nearest")
+                            "surface dimples under the contact; docs/coupling.md); auto = blended for the solids "
+                            "whose surface yields to a point load (S_n/(E l) > 0.5, as check reports), else nearest")
 
 
 class HeatConfig(StrictModel):
