@@ -101,7 +101,8 @@ def test_check_reports_bad_scenes(capsys, workdir, text, key, problem, fix):
 def test_check_strict_fails_on_warnings(capsys, workdir):
     coarse = write(workdir, "coarse.yaml", SCENE.replace("dt: auto, dt_factor: 0.1", "dt: 2.0e-5"))
     code, out, _ = run_main(capsys, "check", coarse)
-    assert code == 0 and "warnings (1)" in out and "30 steps per particle-particle contact" in out, out
+    # restitution 0.5: max(30, 90 gamma_lin^1.5) = 33 steps per contact (docs/restitution.md)
+    assert code == 0 and "warnings (1)" in out and "33 steps per particle-particle contact" in out, out
     code, _, _ = run_main(capsys, "check", coarse, "--strict")
     assert code == 1
 
