@@ -418,16 +418,10 @@ def build_scene_solids(scene, base_dir) -> dict:
     """The scene's solids for `check` (each rank whole, no static solve); a misnamed mesh group is a
     SceneError naming its key (solids[i].fixed[k], ...)."""
     from pdemfem.coupling.check import build_solids
-    from pdemfem.errors import MeshError
-    from pdemfem.scene.inputs import locate_solid_error
+    from pdemfem.scene.inputs import solid_errors_named
 
-    try:
+    with solid_errors_named(scene):
         return build_solids(scene, base_dir)
-    except (MeshError, SceneError) as error:
-        located = locate_solid_error(scene, error)
-        if located is error:
-            raise
-        raise located from None
 
 
 def _stream_text(insert) -> str:

@@ -20,7 +20,7 @@ from pdemfem.contact.tables import build_contact_tables
 from pdemfem.coupling.check import HELD_FORCE_MARGIN, blended_transfer, coupling_assessment
 from pdemfem.coupling.driver import CouplingDriver
 from pdemfem.coupling.surface import CoupledSurface
-from pdemfem.errors import MeshError, SceneError, SolverError
+from pdemfem.errors import SceneError, SolverError
 from pdemfem.io.history import IntervalMean
 from pdemfem.io.simulation_io import SimulationIO
 from pdemfem.monitor import DivergenceMonitor
@@ -32,7 +32,7 @@ from pdemfem.particles.stream import ParticleStreams, stream_radius_range
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
-from pdemfem.scene.inputs import (locate_solid_error, start_solids, start_surfaces, validate_geometry,
+from pdemfem.scene.inputs import (solid_errors_named, start_solids, start_surfaces, validate_geometry,
                                    validate_scene_coordinates)
 from pdemfem.scene.loader import load_scene, output_directory, resolve_path
 from pdemfem.walls.factory import build_contributor_walls
@@ -217,15 +217,9 @@ class Simulation:
             # it conduct and requires them); otherwise it is adiabatic and nothing thermal is allocated.
             conducts = (self.scene.heat_enabled and material.conductivity is not None
                         and material.heat_capacity is not None)
-            try:
+            with solid_errors_named(self.scene):  # a misnamed group: its scene key, with a "did you mean"
                 solid = Solid(config, material, gravity=self.scene.gravity, comm=self.comm, base_dir=self.base_dir,
                               heat=conducts)
-            except (MeshError, SceneError) as error:
-                # A misnamed group: name the scene key (solids[i].fixed[k]) with a "did you mean".
-                located = locate_solid_error(self.scene, error)
-                if located is error:
-                    raise
-                raise located from None
             held = self.comm.allreduce(int(solid.constrained_dofs.sum()))
             if held:
                 solid.static_solve()

@@ -58,16 +58,17 @@ from numba import njit
 from pdemfem.walls.triangle_contact import DAMPING_RECORD_COLUMNS
 
 # A record: particle index, particle id, triangle, weights (3), then the kernel's dashpot record
-# (c_n, c_t, normal (3), lever, particle contact-point velocity (3), surface velocity (3), normal stiffness).
+# (c_n, c_t, normal (3), lever, particle contact-point velocity (3), surface velocity (3), S_n, S_t).
 RECORD_INDEX, RECORD_ID, RECORD_TRIANGLE, RECORD_WEIGHTS = 0, 1, 2, 3
 RECORD_DAMPING = 6
 RECORD_COLUMNS = RECORD_DAMPING + DAMPING_RECORD_COLUMNS
-RECORD_STIFFNESS = RECORD_DAMPING + 12  # S_n, then S_t (0 when sliding)
+STIFFNESS_COLUMN = 12  # of the kernel's record: S_n, then S_t (0 when sliding)
+RECORD_STIFFNESS = RECORD_DAMPING + STIFFNESS_COLUMN
 
 
 def make_records(particles, ids, triangles, weights, damping) -> np.ndarray:
-    """Pack one step's contacts (those with a dashpot or a normal stiffness) into (n, RECORD_COLUMNS) float rows."""
-    active = (damping[:, 0] != 0.0) | (damping[:, 1] != 0.0) | (damping[:, 12] != 0.0) | (damping[:, 13] != 0.0)
+    """Pack one step's contacts (those with a dashpot or a stiffness) into (n, RECORD_COLUMNS) float rows."""
+    active = np.any(damping[:, [0, 1, STIFFNESS_COLUMN, STIFFNESS_COLUMN + 1]] != 0.0, axis=1)
     if not np.any(active):
         return np.zeros((0, RECORD_COLUMNS))
     rows = np.empty((int(active.sum()), RECORD_COLUMNS))

@@ -89,9 +89,10 @@ class ContactSurface:
             self.triangles = np.searchsorted(self.node_indices, self.triangles_global)  # into node_indices
         else:
             # The input faces split alike: triangle for triangle, corner for corner the same nodes.
-            input_numbers, first = np.unique(_triangles(input_faces_by_group, groups), return_index=True)
+            triangles_input = _triangles(input_faces_by_group, groups)
+            input_numbers, first = np.unique(triangles_input, return_index=True)
             self.node_indices = self.triangles_global.ravel()[first]  # global numbers, by input number
-            self.triangles = np.searchsorted(input_numbers, _triangles(input_faces_by_group, groups))
+            self.triangles = np.searchsorted(input_numbers, triangles_input)
         self._layout = reference_coordinates
         self.reference_positions = np.zeros((len(self.node_indices), 3))
         self.whole = NodeGather(self, np.arange(len(self.node_indices)), reference_coordinates)

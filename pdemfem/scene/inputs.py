@@ -19,10 +19,11 @@ or compute garbage is refused before anything runs:
 from __future__ import annotations
 
 import re
+from contextlib import contextmanager
 
 import numpy as np
 
-from pdemfem.errors import SceneError
+from pdemfem.errors import MeshError, SceneError
 
 COORDINATE_LIMIT_RADII = 1.0e9
 
@@ -379,6 +380,19 @@ def _unknown_group_text(group, names, kind, config, index, regions_allowed) -> t
         other = "correct the name, or add a 2-D physical group with this name to the mesh (gmsh)"
     fix = f"did you mean '{close[0]}'? ({other})" if close else other
     return problem, fix
+
+
+@contextmanager
+def solid_errors_named(scene):
+    """Building the scene's solids within: a misnamed mesh group is raised as the SceneError that names its scene key
+    (solids[i].fixed[k], ...) with a "did you mean" (locate_solid_error); other errors pass unchanged."""
+    try:
+        yield
+    except (MeshError, SceneError) as error:
+        located = locate_solid_error(scene, error)
+        if located is error:
+            raise
+        raise located from None
 
 
 def locate_solid_error(scene, error):
