@@ -22,10 +22,12 @@ statement of physics (docs/stability.md lists them):
    available since the baseline: its kinetic, rotational, elastic and solid energies at
    the baseline, the largest drop of its potentials seen since, and the work moving walls
    did.  An integration that creates more energy than the scene ever had is diverging.
-5. Overlap: the contact laws are small-overlap laws.  The pair and plane-wall kernels keep the
-   deepest overlap they met (as a fraction of the smaller radius) since the last check; past 1 for
-   two spheres their centres can cross and they pass through each other: the run stops.  Past
-   derived.PEAK_OVERLAP_WARNING (sphere-sphere or sphere-plane) the run warns once.
+5. Overlap: the contact laws are small-overlap laws.  The pair, plane-wall and triangle-surface kernels
+   keep the deepest overlap they met (as a fraction of the smaller radius) since the last check; past 1
+   for two spheres their centres can cross and they pass through each other: the run stops.  Past
+   derived.PEAK_OVERLAP_WARNING (any of the three) the run warns once.  A solid whose cell turned
+   inside out (deformed volume <= 0, Solid.smallest_volume_ratio) stops the run: the small-strain
+   model is past its validity there, and its surface no longer bounds it.
 6. Thermal step (heat on): the explicit temperature update is stable and overshoot-free while
    dt sum(H) / (m c) <= 1 for every particle (pdemfem.particles.heat); past that the run stops.
    Heat content is not part of the energy test (it is conserved on its own, see docs/heat.md).
@@ -202,6 +204,19 @@ class DivergenceMonitor:
                 f"holds)",
                 "lower time.dt, or raise the particles' heat_capacity (or lower their conductivity); "
                 "`pdemfem check` estimates the thermal step limit (docs/heat.md)")
+        # Collective on every rank, the solids in the scene's order.
+        for index, (name, solid) in enumerate(sim.solids.items()):
+            smallest, inverted = solid.smallest_volume_ratio()
+            if problem is None and inverted:
+                raise SolverError(
+                    f"run stopped at step {sim.step_count} (t = {sim.time:.6g} s)",
+                    f"solid '{name}': {inverted} cell(s) turned inside out (the smallest deformed/undeformed volume "
+                    f"{smallest:.3g}): the solid's displacements reach its cells' size, where the small-strain "
+                    f"model no longer holds and the solid's surface can let particles through",
+                    f"the solid is far too soft for its loads: check solids[{index}]'s material youngs_modulus "
+                    f"(in Pa), its supports (fixed:) and loads (gravity, tractions, the particles on it); past "
+                    f"the point-load limit that `pdemfem check` warns about use coupling.transfer: auto or "
+                    f"blended")
         if problem is None and self.energy_check_skipped is None:
             problem = self._energy_problem(energies)
         if problem is None:
@@ -221,14 +236,16 @@ class DivergenceMonitor:
         system.deepest_overlaps[:] = 0.0
         if self.sim.comm.size > 1:
             self.sim.comm.Allreduce(MPI.IN_PLACE, deepest, op=MPI.MAX)
-        pair, wall = float(deepest[0]), float(deepest[1])
+        pair, wall = float(deepest[0]), float(max(deepest[1], deepest[2]))
         if pair > 1.0:
             return (f"two particles overlapped by {pair:.3g} of the smaller radius: their centres can cross, and "
                     f"they pass through each other (the contact is far too soft for the speeds)")
         if max(pair, wall) > derived.PEAK_OVERLAP_WARNING and not self.overlap_warned:
             self.overlap_warned = True
             if self.sim.comm.rank == 0:
-                where = "two particles" if pair >= wall else "a particle and a plane wall"
+                where = ("two particles" if pair >= wall else
+                         "a particle and a plane wall" if deepest[1] >= deepest[2] else
+                         "a particle and a triangle surface (a mesh wall or a solid's contact surface)")
                 log.warning("by step %d %s overlapped by %.3g of the smaller radius (want <= %g): the contact law "
                             "is a small-overlap law; use stiffer materials (youngs_modulus, normal_stiffness) or "
                             "lower the speeds (`pdemfem check` estimates the overlap at the impact speed)",

@@ -138,11 +138,12 @@ def plate_impact_scene(element: str, transfer: str) -> dict:
             "coupling": {"transfer": transfer}}
 
 
-@pytest.mark.parametrize("element", ["P1"])
+@pytest.mark.parametrize("element", ["P1", "P2"])
 def test_an_impact_on_a_substepped_plate_keeps_its_energy_with_the_default_transfer(tmp_path, element):
     """Measured before the contact springs over the sub-steps: P1 +8.2e-3 of the impact energy after separation
-    (the elastic force held over the plate's 4 sub-steps; at dt / 4, one sub-step, +2.7e-5).  (P2 with the
-    default `nearest` leaves +2.2e-2 whatever the step: docs/coupling.md, a known limit.)  Bound: velocity Verlet's (omega_peak dt)^2 / 4 of the impact energy on the Hertz contact
+    (the elastic force held over the plate's 4 sub-steps; at dt / 4, one sub-step, +2.7e-5).  P2 left +2.2e-2
+    at any step while its faces spread the force by the quadratic face functions instead of the flat
+    sub-triangle's weights that measure the gap (coupling/transfer.py).  Bound: velocity Verlet's (omega_peak dt)^2 / 4 of the impact energy on the Hertz contact
     against the rigid limit (the plate's compliance only softens it), the module docstring's rule."""
     sim = Simulation.from_dict(plate_impact_scene(element, "auto"), output_dir=str(tmp_path / "out"))
     mass = float(sim.particle_system.state.mass[0])

@@ -345,3 +345,81 @@ def test_deep_overlaps_are_warned_about_once(capsys, caplog, workdir, modulus, w
     assert ("the peak overlap is" in err) == warned  # check's estimate, repeated by run
     rows = history(workdir)
     assert float(rows[-1]["kinetic_energy"]) > 0.8 * float(rows[0]["kinetic_energy"])  # e = 0.95: they bounced
+
+
+SPHERE_ON_STEEL_BLOCK = """
+time: {end: 0.0004, dt: auto}
+gravity: [0, 0, 0]
+materials:
+  soft: {density: 7800, youngs_modulus: 1.0e8, poisson_ratio: 0.28}
+  steel: {density: 7800, youngs_modulus: 2.0e11, poisson_ratio: 0.28}
+interactions:
+  default: {model: hertz_mindlin, restitution: 0.95, friction: 0.0}
+particles:
+  - name: ball
+    material: soft
+    radius: 0.001
+    insert: {kind: list, positions: [[0.005, 0.005, 0.01105]], velocities: [[0, 0, -SPEED]]}
+solids:
+  - name: block
+    mesh: {box: [[0, 0, 0], [0.01, 0.01, 0.01]], cells: [1, 1, 1]}
+    material: steel
+    fixed: [zmin]
+    contact: [zmax]
+output: {dir: out, every: 0.0001}
+"""
+
+
+@pytest.mark.parametrize("speed, warned", [("20.0", True), ("5.0", False)])
+def test_deep_overlaps_with_a_solid_surface_are_warned_about_once(capsys, caplog, workdir, speed, warned):
+    """The triangle-surface contacts keep their deepest overlap for the monitor too: a soft sphere (E = 100 MPa,
+    R = 1 mm) hitting a steel block at 20 m/s overlaps Hertz's (15 m v^2 / (16 E* sqrt(R)))^(2/5) = 0.42 radii
+    (the block is 2000x stiffer: E* ~ the sphere's), past PEAK_OVERLAP_WARNING = 0.25; at 5 m/s 0.14 radii."""
+    code, _, err = run_cli(capsys, workdir, SPHERE_ON_STEEL_BLOCK.replace("SPEED", speed))
+    assert code == 0, err
+    logged = [record.getMessage() for record in caplog.records if "overlapped by" in record.getMessage()]
+    assert len(logged) == (1 if warned else 0), logged
+    if warned:
+        assert "triangle surface" in logged[0], logged[0]
+        measured = float(logged[0].split("overlapped by ")[1].split()[0])
+        # Hertz's undamped peak (the block's own compliance adds 0.05 %), a few per cent less with the dashpot.
+        assert 0.38 < measured < 0.43, logged[0]
+
+
+JELLY_BLOCK = """
+time: {end: 0.01, dt: auto}
+gravity: [0, 0, -9.81]
+materials:
+  grain: {density: 2500, youngs_modulus: 1.0e7, poisson_ratio: 0.25}
+  jelly: {density: 1000, youngs_modulus: MODULUS, poisson_ratio: 0.3}
+interactions:
+  default: {model: hertz_mindlin, restitution: 0.5, friction: 0.3}
+particles:
+  - name: grain
+    material: grain
+    radius: 0.005
+    insert: {kind: list, positions: [[0.05, 0.05, 0.2]]}
+solids:
+  - name: block
+    mesh: {box: [[0, 0, 0], [0.1, 0.1, 0.1]], cells: [2, 2, 2]}
+    material: jelly
+    fixed: [zmin]
+    contact: [zmax]
+output: {dir: out, every: 0.001}
+"""
+
+
+@pytest.mark.parametrize("modulus, stops", [("20.0", True), ("2.0e5", False)])
+def test_a_solid_turned_inside_out_stops_the_run(capsys, workdir, modulus, stops):
+    """A 10 cm block with E = 20 Pa (kPa or MPa meant) sags under its own weight by ~rho g H^2 / (2 E) = 2.5 m
+    in the static start, 50x its cells: cells turn inside out, where the linear model means nothing and the top
+    no longer bounds the solid.  The monitor stops before the first step, naming the solid and the key to check.
+    At E = 200 kPa (2.5 mm, 5 % of a cell) the run goes to the end."""
+    code, _, err = run_cli(capsys, workdir, JELLY_BLOCK.replace("MODULUS", modulus))
+    if stops:
+        assert code == 3, err
+        assert "solid 'block'" in err and "turned inside out" in err and "solids[0]" in err, err
+        assert "youngs_modulus" in err and "Traceback" not in err, err
+        assert float(history(workdir)[-1]["time"]) == 0.0
+    else:
+        assert code == 0, err

@@ -49,6 +49,14 @@ its sub-steps, gathered with the surface: momentum stays exact.  A solid with `m
 held force alone (its nodes' displacements are in the moving frame), and so does a window of
 several DEM steps (fem_every > 1: the particles move on against the frozen surface; the held
 force's own limit S_n h^2 / (4 m) <= 1 sets the window, pdemfem.coupling.check).
+
+The blended gap (coupling.transfer: blended) spreads a contact's held normal force over the vertices of
+every facet under the particle, so its normal spring goes there too: share rows, one per blended facet
+vertex v with its share b_v (omega_t / sum omega times the facet's nearest-point weight: >= 0, summing
+to 1), give the node the spring S_n b_v n n^T and the particle, after the advance, the opposite impulse
+S_n n sum_v b_v (n . A_v), along n through its centre as the blended normal force acts.  The record
+keeps the tangential spring at the nearest point (its S_n is 0).  With one facet under the particle
+the shares are the nearest triangle's weights.
 """
 from __future__ import annotations
 
@@ -78,6 +86,60 @@ def make_records(particles, ids, triangles, weights, damping) -> np.ndarray:
     rows[:, RECORD_WEIGHTS:RECORD_WEIGHTS + 3] = weights[active]
     rows[:, RECORD_DAMPING:] = damping[active]
     return rows
+
+
+# A share row: particle index, particle id (as a record's first two columns), vertex, S_n b_v, normal (3).
+SHARE_VERTEX, SHARE_STIFFNESS, SHARE_NORMAL = 2, 3, 4
+SHARE_COLUMNS = 7
+
+
+def make_share_rows(particles, ids, share_contact, share_vertex, share_value, damping) -> np.ndarray:
+    """One step's blended contacts' normal springs as (n, SHARE_COLUMNS) rows (module docstring)."""
+    active = share_value > 0.0
+    rows = np.empty((int(active.sum()), SHARE_COLUMNS))
+    contact = share_contact[active]
+    rows[:, RECORD_INDEX] = particles[contact]
+    rows[:, RECORD_ID] = ids[contact]
+    rows[:, SHARE_VERTEX] = share_vertex[active]
+    rows[:, SHARE_STIFFNESS] = share_value[active]
+    rows[:, SHARE_NORMAL:SHARE_NORMAL + 3] = damping[contact, 2:5]
+    return rows
+
+
+@njit(cache=True)
+def node_share_springs(rows, scale, springs):
+    """springs[v] += scale S_n b_v n n^T (xx, yy, zz, yz, xz, xy) per share row."""
+    for r in range(rows.shape[0]):
+        vertex = int(rows[r, SHARE_VERTEX])
+        stiffness = scale * rows[r, SHARE_STIFFNESS]
+        nx = rows[r, SHARE_NORMAL]
+        ny = rows[r, SHARE_NORMAL + 1]
+        nz = rows[r, SHARE_NORMAL + 2]
+        springs[vertex, 0] += stiffness * nx * nx
+        springs[vertex, 1] += stiffness * ny * ny
+        springs[vertex, 2] += stiffness * nz * nz
+        springs[vertex, 3] += stiffness * ny * nz
+        springs[vertex, 4] += stiffness * nx * nz
+        springs[vertex, 5] += stiffness * nx * ny
+
+
+@njit(cache=True)
+def balance_share_springs(rows, local_index, spring_integrals, scale, velocities, mass):
+    """Each share row's particle (local_index[r] >= 0) takes scale S_n b_v n (n . A_v), A_v the time integral of
+    vertex v's displacement over the advance: the opposite of the impulse its spring gave the node."""
+    for r in range(rows.shape[0]):
+        i = local_index[r]
+        if i < 0:
+            continue
+        vertex = int(rows[r, SHARE_VERTEX])
+        nx = rows[r, SHARE_NORMAL]
+        ny = rows[r, SHARE_NORMAL + 1]
+        nz = rows[r, SHARE_NORMAL + 2]
+        along = scale * rows[r, SHARE_STIFFNESS] * (nx * spring_integrals[vertex, 0] + ny * spring_integrals[vertex, 1]
+                                                    + nz * spring_integrals[vertex, 2]) / mass[i]
+        velocities[i, 0] += along * nx
+        velocities[i, 1] += along * ny
+        velocities[i, 2] += along * nz
 
 
 @njit(inline="always", cache=True)

@@ -27,7 +27,7 @@ Momentum.  The particles receive F^{n+1} dt (two half kicks around t^{n+1}); the
 solid receives the same impulse through its step.  With the particles' momentum
 measured at the half level, m v^{n+1} + dt/2 F^{n+1} (the velocity after the next
 first half kick), particles + solid conserve linear momentum to round-off; the
-barycentric / quadratic-face spreading conserves force and moment exactly.
+barycentric spreading conserves force and moment exactly.
 
 Contact dashpots.  The damping part of each contact force is not held over the interval:
 the solid applies it to the surface nodes implicitly at every FE sub-step and the particles

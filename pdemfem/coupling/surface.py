@@ -46,11 +46,9 @@ from mpi4py import MPI
 from pdemfem import state_dict as kinds
 from pdemfem.coupling import selection as chosen
 from pdemfem.coupling.dampers import (RECORD_COLUMNS, RECORD_DAMPING, RECORD_ID, RECORD_INDEX, RECORD_TRIANGLE,
-                                      RECORD_WEIGHTS, balance_particles,
-                                      make_records,
-                                      node_dampers)
-from pdemfem.coupling.transfer import (SUB_TRIANGLE_AREA_COORDINATES, parent_faces_from_split, spread_linear,
-                                       spread_quadratic)
+                                      RECORD_WEIGHTS, SHARE_COLUMNS, balance_particles, balance_share_springs,
+                                      make_records, make_share_rows, node_dampers, node_share_springs)
+from pdemfem.coupling.transfer import spread_linear
 from pdemfem.parallel.exchange import allgather_rows
 from pdemfem.walls.mesh import TriangleSurface
 
@@ -98,8 +96,6 @@ class CoupledSurface(kinds.StateComponent):
         contact = solid.contact_surface()
         self.node_indices = contact.node_indices              # global FE node numbers of the surface nodes
         self.triangles = np.ascontiguousarray(contact.triangles, dtype=np.int64)  # into node_indices
-        self.quadratic = solid.config.element == "P2"
-        self.parent_faces = parent_faces_from_split(self.triangles) if self.quadratic else None
         _, positions, velocities = solid.surface_state()
         self.triangle_surface = SolidTriangleSurface(self.name, positions, self.triangles, material_index,
                                                      velocities=velocities, smooth_angle=smooth_angle, skin=skin,
@@ -126,6 +122,11 @@ class CoupledSurface(kinds.StateComponent):
         self.damper_records = []
         self._advanced_records = np.zeros((0, RECORD_COLUMNS))
         self._advanced_spring_scale = 1.0  # the records' share of the advance (send_forces_to_solid's scale)
+        # The blended contacts' normal springs (dampers.py, share rows) of the steps since the last advance, and
+        # those of the advance in progress: used only by an advance of one DEM step, so never pending at a
+        # checkpoint that matters (a longer window drops them).
+        self.share_rows = []
+        self._advanced_shares = np.zeros((0, SHARE_COLUMNS))
         self.particle_system = None  # set by the simulation: the dashpot balance acts on its particles
         self.dissipation_correction_local = 0.0  # [J], this rank's contacts (dampers.balance_particles)
         # Heat: only when the solid conducts (Solid.heat); the particles' side decides whether contacts conduct.
@@ -153,13 +154,14 @@ class CoupledSurface(kinds.StateComponent):
                 self._remove_transport(records)
             if len(records):
                 self.damper_records.append(records)
+            if len(contacts.share_contact):
+                self.share_rows.append(make_share_rows(contacts.particle, self.particle_system.state.ids,
+                                                       contacts.share_contact, contacts.share_vertex,
+                                                       contacts.share_value, contacts.damping))
         self.node_forces[:] = 0.0
         if len(contacts.triangle):
-            if self.quadratic:
-                spread_quadratic(self.parent_faces, SUB_TRIANGLE_AREA_COORDINATES, contacts.triangle,
-                                 contacts.weights, contacts.force, self.node_forces)
-            else:
-                spread_linear(self.triangles, contacts.triangle, contacts.weights, contacts.force, self.node_forces)
+            # P2 faces too: by the flat sub-triangle's weights, the gap's own derivative (transfer.py).
+            spread_linear(self.triangles, contacts.triangle, contacts.weights, contacts.force, self.node_forces)
         if self.triangle_surface.blended:
             # The contacts' normal elastic forces, spread over the nodes under the particle by the blended gap.
             self.node_forces += self.triangle_surface.vertex_forces
@@ -201,19 +203,26 @@ class CoupledSurface(kinds.StateComponent):
             self._book_frame_work(self.accumulated_forces / steps)
         records = np.concatenate(self.damper_records) if self.damper_records else np.zeros((0, RECORD_COLUMNS))
         self.damper_records = []
+        with_springs = dampers and self.frame is None and steps == 1
+        shares = (np.concatenate(self.share_rows) if self.share_rows and with_springs
+                  else np.zeros((0, SHARE_COLUMNS)))
+        self.share_rows = []
         if dampers and len(records) and self.frame is not None:
             self._remove_frame_velocity(records, interval)
         self._advanced_records = records if dampers else records[:0]
+        self._advanced_shares = shares
         self._advanced_spring_scale = scale
-        if dampers and len(records):
+        if dampers and (len(records) or len(shares)):
             tensors = np.zeros((len(self.node_indices), 6))
             targets = np.zeros((len(self.node_indices), 3))
             previous_forces = np.zeros((len(self.node_indices), 3))
             # The contact springs over the sub-steps (dampers.py), for an advance of one DEM step: over a window of
             # several (fem_every > 1) the particles move too and the held force has its own limit (check.py); a
             # solid with motion keeps the held force alone.
-            springs = np.zeros((len(self.node_indices) if self.frame is None and steps == 1 else 0, 6))
+            springs = np.zeros((len(self.node_indices) if with_springs else 0, 6))
             node_dampers(records, self.triangles, scale, tensors, targets, previous_forces, springs)
+            if len(shares):
+                node_share_springs(shares, scale, springs)
             forces -= previous_forces
             damped = np.any(tensors != 0.0, axis=1)
             if len(springs):
@@ -252,6 +261,8 @@ class CoupledSurface(kinds.StateComponent):
         checkpoint) are shared with all ranks and balanced where the particle lives."""
         records = self._advanced_records
         self._advanced_records = records[:0]
+        shares = self._advanced_shares
+        self._advanced_shares = shares[:0]
         system = self.particle_system
         if system is None:
             return
@@ -265,6 +276,10 @@ class CoupledSurface(kinds.StateComponent):
                 local_index = np.concatenate([local_index[local_index >= 0],
                                               self._local_index(shared, state, by_id_only=True)])
         spring_integrals = self._spring_integrals()
+        if len(shares) and len(spring_integrals):
+            # Share rows exist only for an advance of one DEM step, whose particles stayed on their rank.
+            balance_share_springs(shares, self._local_index(shares, state), spring_integrals,
+                                  self._advanced_spring_scale, state.velocities, state.mass)
         if len(records):
             vertex_velocities = (self.triangle_surface.vertex_velocities if self.frame is None
                                  else self._relative_vertex_velocities)

@@ -802,6 +802,24 @@ class Solid(kinds.StateComponent):
         self.stiffness.mult(self.displacement_vec, product)
         return 0.5 * product.dot(self.displacement_vec) - self.thermal_load_vec.dot(self.displacement_vec) + self._thermal_energy
 
+    def smallest_volume_ratio(self) -> tuple:
+        """Collective: (smallest deformed / undeformed volume of a cell's corner tetrahedron, cells at or below zero),
+        over all ranks.  A cell turned inside out is beyond what the small-strain model describes; its faces no
+        longer bound the solid, so particles can pass through (the run monitor stops there)."""
+        corners = self.mesh.cells[:self.mesh.n_owned_cells, :4]
+        reference = self.mesh.points
+        deformed = reference + local_values(self.displacement_vec, 3)
+        volumes = []
+        for points in (reference, deformed):
+            a = points[corners[:, 0]]
+            volumes.append(np.einsum("ij,ij->i", np.cross(points[corners[:, 1]] - a, points[corners[:, 2]] - a),
+                                     points[corners[:, 3]] - a))
+        ratios = volumes[1] / volumes[0]
+        local = np.array([ratios.min() if len(ratios) else np.inf, -float(np.count_nonzero(ratios <= 0.0))])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.MIN)  # the count's negative: MIN gives the largest
+        return float(local[0]), int(-local[1])
+
     # ---------------------------------------------------------------- surface
     def contact_surface(self, groups=None) -> ContactSurface:
         """Collective on first use: the contact groups' triangles and a gather of their nodes' state."""

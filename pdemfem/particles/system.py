@@ -120,8 +120,9 @@ class ParticleSystem(kinds.StateComponent):
         self.dissipated_energy = 0.0
         self.contact_count = 0
         # This rank's deepest contact overlap since the run monitor last read it, as a fraction of the smaller
-        # radius: [sphere-sphere, sphere-plane wall] (the monitor reduces and resets it at its checks).
-        self.deepest_overlaps = np.zeros(2)
+        # radius: [sphere-sphere, sphere-plane wall, sphere-triangle surface] (the monitor reduces and resets it at
+        # its checks).
+        self.deepest_overlaps = np.zeros(3)
         self.lost_particles = 0
         self.nonfinite_particles = 0  # of lost_particles: removed because a position became inf/NaN
         self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift

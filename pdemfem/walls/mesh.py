@@ -250,7 +250,13 @@ class TriangleSurface(ContributorWall):
         self._records = SimpleNamespace(
             particle=np.zeros(capacity, dtype=np.int64), triangle=np.zeros(capacity, dtype=np.int32),
             weights=np.zeros((capacity, 3)), point=np.zeros((capacity, 3)), force=np.zeros((capacity, 3)),
-            damping=np.zeros((capacity, DAMPING_RECORD_COLUMNS)))
+            damping=np.zeros((capacity, DAMPING_RECORD_COLUMNS)),
+            # The blended contacts' springs over the blended facets' vertices (triangle_contact.mesh_contact_forces):
+            # at most 3 rows per candidate triangle.
+            share_contact=np.zeros(3 * capacity if self.blended else 0, dtype=np.int64),
+            share_vertex=np.zeros(3 * capacity if self.blended else 0, dtype=np.int64),
+            share_value=np.zeros(3 * capacity if self.blended else 0))
+        self.share_count = 0
 
     def _lists_valid(self, state, first: int, last: int, skin: float) -> bool:
         if self._list_key != (id(state.ids), state.count, first, last):
@@ -297,7 +303,7 @@ class TriangleSurface(ContributorWall):
             self.vertex_forces[:] = 0.0
         records = self._records
         temperatures, heat_flows = self._heat_arrays(state)
-        elastic, dissipated, contacts, work, self.step_heat = mesh_contact_forces(
+        elastic, dissipated, contacts, work, self.step_heat, self.share_count, deepest = mesh_contact_forces(
             first, last, self.candidate_offsets, self.candidate_triangles,
             self.vertices, self.vertex_velocities, self.triangles, self.patch,
             self.vertex_patch_offsets, self.vertex_patches, self.one_sided, self.material_index,
@@ -306,9 +312,12 @@ class TriangleSurface(ContributorWall):
             state.inverse_inertia, state.material_index, tables.coefficients, tables.composition,
             tables.cohesion_reach, system.dt, state.forces, state.torques, self.totals, self.spread_to_vertices, self.vertex_forces,
             records.particle, records.triangle, records.weights, records.point, records.force, records.damping,
-            self._scratch_int, self._scratch_float, self._spare_history, self.transport_velocity,
+            records.share_contact, records.share_vertex, records.share_value, self._scratch_int, self._scratch_float, self._spare_history, self.transport_velocity,
             temperatures, heat_flows, self.vertex_temperatures, self.vertex_heat)
         self.contact_count = int(contacts)
+        # The run monitor's overlap test (pdemfem.monitor, test 5): a centre reaching the surface passes through it.
+        if deepest > system.deepest_overlaps[2]:
+            system.deepest_overlaps[2] = deepest
         if self.work_of_transport_only:
             work = self._transport_work(system.dt)
         self._step_work = float(work)
@@ -333,8 +342,11 @@ class TriangleSurface(ContributorWall):
         dashpot record (c_n, c_t, normal, lever, particle and surface velocity at the contact point)."""
         n = min(self.contact_count, len(self._records.particle))
         r = self._records
+        shares = self.share_count
         return SimpleNamespace(particle=r.particle[:n], triangle=r.triangle[:n], weights=r.weights[:n],
-                               point=r.point[:n], force=r.force[:n], damping=r.damping[:n])
+                               point=r.point[:n], force=r.force[:n], damping=r.damping[:n],
+                               share_contact=r.share_contact[:shares], share_vertex=r.share_vertex[:shares],
+                               share_value=r.share_value[:shares])
 
 
 class MeshWall(TriangleSurface):

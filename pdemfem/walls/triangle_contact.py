@@ -233,12 +233,15 @@ def _clipped_distance_gradient(p, xa, xb, xc, neighbours, out_p, out_a, out_b, o
 
 @njit(cache=True)
 def blend_overlap(px, py, pz, radius, patch, first, last_k, candidate_triangles, vertices, triangles, triangle_patch,
-                  gradient_p, node_scale, vertex_forces, edge_neighbours):
+                  gradient_p, node_scale, vertex_forces, edge_neighbours, share_vertex, share_value, share_start):
     """The blended overlap (module docstring): delta = sum_t k(s_t) (R - d_t) / sum_t k(s_t) over the patch's
     candidate triangles closer than R (s_t the point-triangle distance, k = (1 - s^2/R^2)^2, d_t the distance to
     the triangle's plane cut at the patch's boundary edges); gradient_p <- d delta / d p; when node_scale != 0,
     vertex_forces[k] += node_scale * d delta / d x_k.  Two passes: the weighted sum, then (with delta known) the
-    derivatives, whose weight terms carry (R - d_t - delta).  Returns (delta, weight sum)."""
+    derivatives, whose weight terms carry (R - d_t - delta).  With share_start >= 0 the second pass also writes, from
+    row share_start on, each blended facet's vertices with their share of the contact, (omega_t / sum omega) times
+    the barycentric weight of the facet's nearest point (>= 0, summing to 1 over the rows): the contact springs
+    over the FE sub-steps spread by them (coupling/dampers.py).  Returns (delta, weight sum, the rows' end)."""
     p = np.array([px, py, pz])
     g_p = np.zeros(3)
     g_a = np.zeros(3)
@@ -264,8 +267,9 @@ def blend_overlap(px, py, pz, radius, patch, first, last_k, candidate_triangles,
                                        g_c)
         total += omega
         weighted += omega * (radius - d)
+    shares = share_start
     if total == 0.0:
-        return 0.0, 0.0
+        return 0.0, 0.0, shares
     delta = weighted / total
     gradient_p[:] = 0.0
     for k in range(first, last_k):
@@ -279,9 +283,19 @@ def blend_overlap(px, py, pz, radius, patch, first, last_k, candidate_triangles,
                                                         vertices[b, 0], vertices[b, 1], vertices[b, 2],
                                                         vertices[c, 0], vertices[c, 1], vertices[c, 2])
         s = math.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2)
-        if s >= radius or s == 0.0:
+        if s >= radius:
             continue
         omega = (1.0 - s * s / (radius * radius)) ** 2
+        if shares >= 0:
+            share_vertex[shares] = a
+            share_value[shares] = omega * wa / total
+            share_vertex[shares + 1] = b
+            share_value[shares + 1] = omega * wb / total
+            share_vertex[shares + 2] = c
+            share_value[shares + 2] = omega * wc / total
+            shares += 3
+        if s == 0.0:
+            continue
         domega = -4.0 * s * (1.0 - s * s / (radius * radius)) / (radius * radius)
         d = _clipped_distance_gradient(p, vertices[a], vertices[b], vertices[c], edge_neighbours[t], g_p, g_a, g_b,
                                        g_c)
@@ -300,7 +314,7 @@ def blend_overlap(px, py, pz, radius, patch, first, last_k, candidate_triangles,
                 vertex_forces[a, axis] += node_scale * ((-omega * g_a[axis]) / total - factor * wa * u_axis)
                 vertex_forces[b, axis] += node_scale * ((-omega * g_b[axis]) / total - factor * wb * u_axis)
                 vertex_forces[c, axis] += node_scale * ((-omega * g_c[axis]) / total - factor * wc * u_axis)
-    return delta, total
+    return delta, total, shares
 
 
 @njit(cache=True)
@@ -312,8 +326,8 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                         coefficients, composition, cohesion_reach, dt,
                         forces, torques, totals, spread_to_vertices, vertex_forces,
                         record_particle, record_triangle, record_weights, record_point, record_force,
-                        record_damping, scratch_int, scratch_float, spare_history, transport_velocity,
-                        temperatures, heat_flows, vertex_temperatures, vertex_heat):
+                        record_damping, share_contact, share_vertex, share_value, scratch_int, scratch_float,
+                        spare_history, transport_velocity, temperatures, heat_flows, vertex_temperatures, vertex_heat):
     """Add the mesh-wall contact forces of particles [first, last).
 
     With heat on (composition) and vertex temperatures given (an empty array: adiabatic), a contact
@@ -331,7 +345,12 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
     beyond touching down to its pull-off overlap: triangles within radius + cohesion_reach propose.
     transport_velocity (3): a conveyor surface's velocity; its part along the contact's tangent plane
     adds to the surface velocity the contact law sees (the geometry does not move).
-    Returns (elastic, dissipated, contacts, work done on the particles by the wall, heat [J] it gave them).
+    A blended contact (blended: the blended gap applied) spreads its normal contact spring over the blended facets'
+    vertices instead of its nearest triangle's: rows of share_contact (the contact's record), share_vertex and
+    share_value (S_n times the vertex's share, blend_overlap), and its record's S_n is 0 (coupling/dampers.py).
+    share_* hold at least 3 rows per candidate triangle.
+    Returns (elastic, dissipated, contacts, work done on the particles by the wall, heat [J] it gave them, the
+    share rows written, the deepest overlap as a fraction of the particle's radius).
     """
     touching_column = history_layout(composition)[2]
     conducting = (composition & HEAT) != 0 and vertex_temperatures.shape[0] > 0
@@ -341,6 +360,8 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
     dissipated_total = 0.0
     work = 0.0
     contacts = 0
+    shares = 0
+    deepest = 0.0
     slots = slot_patch.shape[1]
     for i in range(first, last):
         px = positions[i, 0]
@@ -541,11 +562,14 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
             sz = wa * vertex_velocities[a, 2] + wb * vertex_velocities[b, 2] + wc * vertex_velocities[c, 2]
             scale = 1.0
             blend_applied = False
+            first_share = shares
+            normal_elastic_force = 0.0
             if blended:
                 # The blended gap (module docstring): its normal and overlap; scale = |grad_p delta|.
-                delta, total = blend_overlap(px, py, pz, radius, patch, candidate_offsets[i], candidate_offsets[i + 1],
-                                             candidate_triangles, vertices, triangles, triangle_patch, blend_gradient,
-                                             0.0, vertex_forces, edge_neighbours)
+                delta, total, _ = blend_overlap(px, py, pz, radius, patch, candidate_offsets[i],
+                                                candidate_offsets[i + 1], candidate_triangles, vertices, triangles,
+                                                triangle_patch, blend_gradient, 0.0, vertex_forces, edge_neighbours,
+                                                share_vertex, share_value, -1)
                 norm = math.sqrt(blend_gradient[0] ** 2 + blend_gradient[1] ** 2 + blend_gradient[2] ** 2)
                 if total > 0.0 and norm > 0.0 and delta > 0.0:
                     nx = -blend_gradient[0] / norm
@@ -577,9 +601,10 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 forces[i, 0] += extra * nx
                 forces[i, 1] += extra * ny
                 forces[i, 2] += extra * nz
-                blend_overlap(px, py, pz, radius, patch, candidate_offsets[i], candidate_offsets[i + 1],
-                              candidate_triangles, vertices, triangles, triangle_patch, blend_gradient,
-                              -normal_elastic_force, vertex_forces, edge_neighbours)
+                _, _, shares = blend_overlap(px, py, pz, radius, patch, candidate_offsets[i], candidate_offsets[i + 1],
+                                             candidate_triangles, vertices, triangles, triangle_patch, blend_gradient,
+                                             -normal_elastic_force, vertex_forces, edge_neighbours, share_vertex,
+                                             share_value, shares)
                 # The wall's total force (totals, records' sum) is the particle's; the records carry the rest.
                 elastic_x = scale * normal_elastic_force * nx
                 elastic_y = scale * normal_elastic_force * ny
@@ -595,6 +620,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 fy -= normal_elastic_force * ny
                 fz -= normal_elastic_force * nz
             history[slot, overlap_column] = radius - distance  # this step's overlap
+            deepest = max(deepest, (radius - distance) / radius)
             if conducting:
                 conductance = contact_conductance(composition, coefficients, material_index[i], wall_material,
                                                   radius - distance, mass[i], radius)
@@ -648,13 +674,20 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 stiffness = normal_elastic(int(coefficients[material_index[i], wall_material, NORMAL_MODEL]),
                                            composition, radius - distance, coefficients, material_index[i],
                                            wall_material, mass[i], radius)
-                # (With the blended gap the normal elastic force is spread over every blended facet's nodes, and
-                # this spring by the nearest triangle's weights only: it compensates the held force's lag in part;
-                # without it a P2 block under a resting sphere gained 19,000x Verlet's bound in 1 s, with it 60x.)
                 record_damping[contacts, 12] = max(stiffness[1], 0.0)
+                if blend_applied:
+                    # The normal spring goes where the blended gap spread the held normal force: over the blended
+                    # facets' vertices (coupling/dampers.py).
+                    for row in range(first_share, shares):
+                        share_contact[row] = contacts
+                        share_value[row] *= record_damping[contacts, 12]
+                    record_damping[contacts, 12] = 0.0
                 # The tangential spring while the contact sticks (its force below the Coulomb limit): sliding, the
                 # force does not follow the displacement.
-                normal_part = fx * nx + fy * ny + fz * nz
+                # (The blended gap took the normal elastic part out of f above; the Coulomb limit is the whole
+                # normal force's.  Without it a blended contact never stuck: no tangential spring, and a sphere
+                # resting with friction on a sub-stepped block pumped energy through its held tangential force.)
+                normal_part = fx * nx + fy * ny + fz * nz + normal_elastic_force
                 tangential_squared = (fx * fx + fy * fy + fz * fz) - normal_part * normal_part
                 limit = coefficients[material_index[i], wall_material, FRICTION] * max(normal_part, 0.0)
                 sticking = tangential_squared < (1.0 - 1e-9) * limit * limit
@@ -670,7 +703,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 vertex_forces[c, 1] -= wc * fy
                 vertex_forces[c, 2] -= wc * fz
             contacts += 1
-    return elastic_total, dissipated_total, contacts, work, heat
+    return elastic_total, dissipated_total, contacts, work, heat, shares, deepest
 
 
 @njit(cache=True)

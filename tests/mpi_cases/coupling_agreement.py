@@ -3,7 +3,8 @@
 usage: coupling_agreement.py OUT.npz CASE STEPS [ulp]
 CASE: ball (ball on block, P1) or pile (pile on plate, P2).  Writes (rank 0) particle positions and
 velocities by id, the surface force, the support reaction and the solid's surface node positions.
-"ulp" (serial) shifts particle 0 by one unit in the last place of x: the round-off growth reference.
+"ulp" (serial) shifts every particle's x by one unit in the last place of the largest coordinate: the
+round-off growth reference.
 """
 import sys
 from pathlib import Path
@@ -43,8 +44,11 @@ def main():
     sim = Simulation.from_dict(scene, comm=comm, output_dir=str(Path(out).parent / "unused"))
     if perturb:
         state = sim.particle_system.state
-        row = np.nonzero(state.ids == 0)[0]
-        state.positions[row, 0] += np.spacing(state.positions[row, 0])
+        # Every particle by one unit in the last place of the scene's coordinates: shifting particle 0 alone left
+        # the pile's forces and velocities unchanged bit for bit (it touched nothing in the window), an empty
+        # reference.
+        owned = state.owned_count
+        state.positions[:owned, 0] += np.spacing(np.abs(state.positions[:owned]).max())
     forces = []
     for _ in range(steps):
         sim.step()
