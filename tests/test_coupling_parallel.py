@@ -29,7 +29,7 @@ def run(tmp_path, ranks, case, steps, *extra):
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("case, steps", [("ball", 400), ("pile", 1500), ("pile_window", 600)])
+@pytest.mark.parametrize("case, steps", [("ball", 400), ("pile", 1500), ("pile_blended", 1500), ("pile_window", 600)])
 def test_one_and_three_ranks_agree(tmp_path, case, steps):
     serial = run(tmp_path, 1, case, steps)
     nudged = run(tmp_path, 1, case, steps, "ulp")

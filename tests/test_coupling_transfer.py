@@ -119,3 +119,36 @@ def test_auto_transfer_blends_only_the_solids_a_point_load_dimples(tmp_path):
         scene["materials"]["steel"]["youngs_modulus"] = modulus
         sim = Simulation.from_dict(scene, output_dir=tmp_path / f"{modulus:g}")
         assert sim.coupled_surfaces[0].triangle_surface.blended is blended
+
+
+def test_blended_contact_spring_balance_reaches_its_own_particle(tmp_path):
+    """The blended contact's normal spring over the FE sub-steps (share rows, coupling/dampers.py) is balanced on the
+    particle that touches: a bead touching a P2 plate (2 sub-steps per DEM step) next to a bead still in the air,
+    the airborne bead moves bit-identically to the same bead alone.  (The share rows carried the id of the particle
+    at the contact's *record* index: the touching bead's spring impulse went to the airborne one, and on 2 ranks to
+    another particle than on 1: the solid's contact forces depended on the rank count by ~4e-7.)"""
+    def airborne(positions, name):
+        scene = {
+            "time": {"end": 0.01, "dt": 8.9e-6},
+            "gravity": [0.0, 0.0, -9.81],
+            "materials": {"glass": {"density": 2500, "youngs_modulus": 1.0e7, "poisson_ratio": 0.3},
+                          "alu": {"density": 2700, "youngs_modulus": 7.0e8, "poisson_ratio": 0.33}},
+            "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.3, "friction": 0.5}},
+            "particles": [{"name": "beads", "material": "glass", "radius": 0.005,
+                           "insert": {"kind": "list", "positions": positions,
+                                      "velocities": [[0.0, 0.0, -0.5]] * len(positions)}}],
+            "solids": [{"name": "plate", "mesh": {"box": [[0, 0, 0], [0.2, 0.2, 0.02]], "cells": [6, 6, 1]},
+                        "material": "alu", "element": "P2", "mass": "lumped", "damping": {"alpha": 500.0, "beta": 0.0},
+                        "fixed": ["xmin", "xmax"], "contact": ["zmax"]}],
+            "coupling": {"fem_every": 1, "transfer": "blended"},
+        }
+        sim = Simulation.from_dict(scene, output_dir=str(tmp_path / name))
+        sim.step(250)
+        assert sim.coupling.fem_substeps["plate"] > 1  # the springs act only over several sub-steps
+        particles = sim.particles
+        return sim.contact_count(), particles.velocities[particles.ids == 0][0]
+
+    contacts, together = airborne([[0.07, 0.1, 0.035], [0.13, 0.1, 0.0258]], "both")
+    assert contacts == 1  # bead 1 rests on the plate, bead 0 (id 0) falls
+    _, alone = airborne([[0.07, 0.1, 0.035]], "alone")
+    assert np.array_equal(together, alone), together - alone

@@ -12,6 +12,10 @@ HELD_FORCE_LIMIT = 1.0
 # dt auto on a yielding surface takes this fraction of the interval HELD_FORCE_LIMIT allows (the margin dt auto
 # keeps to the dashpot's stability limit too): at the limit itself the surface node is marginally stable.
 HELD_FORCE_MARGIN = 0.5
+# The contact springs over the FE sub-steps act on a window of several DEM steps (fem_every > 1) while the window
+# is within this fraction of the interval HELD_FORCE_LIMIT allows (pdemfem.coupling.dampers; measured in
+# docs/coupling.md, "Contact springs over the FE sub-steps").
+WINDOW_SPRING_SHARE = 0.5
 # Above this, one contact displaces the surface as much as the solid resists it (S_n vs E l): the surface
 # then follows the contact force within the interval and the held force lags it.
 SURFACE_COMPLIANCE_LIMIT = 0.1

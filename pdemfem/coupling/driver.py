@@ -55,9 +55,11 @@ from pdemfem import state_dict as kinds
 
 class CouplingDriver(kinds.StateComponent):
     def __init__(self, solids: dict, surfaces: list, dt: float, fem_every: int = 1, prime: bool = True,
-                 comm=None):
+                 comm=None, window_springs: bool = False):
         """Collective.  Call after the particle system has evaluated its initial contacts (F^0).
-        comm: the simulation's communicator (default: the solids')."""
+        comm: the simulation's communicator (default: the solids').  window_springs: the contact springs over
+        the FE sub-steps (coupling/dampers.py) also act on advances of several DEM steps (fem_every > 1)."""
+        self.window_springs = bool(window_springs)
         self.comm = comm if comm is not None else next((solid.comm for solid in solids.values()), MPI.COMM_SELF)
         self.solids = solids
         self.surfaces = surfaces
@@ -133,7 +135,7 @@ class CouplingDriver(kinds.StateComponent):
         self._kick_free_axes(1.0 / self.steps_since_advance, interval)
         for surface in self.surfaces:
             surface.send_forces_to_solid(1.0 / self.steps_since_advance, interval=interval,
-                                         steps=self.steps_since_advance)
+                                         steps=self.steps_since_advance, springs=self.window_springs)
         self._advance_solids(interval)
         self.steps_since_advance = 0
 

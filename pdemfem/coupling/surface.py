@@ -122,9 +122,8 @@ class CoupledSurface(kinds.StateComponent):
         self.damper_records = []
         self._advanced_records = np.zeros((0, RECORD_COLUMNS))
         self._advanced_spring_scale = 1.0  # the records' share of the advance (send_forces_to_solid's scale)
-        # The blended contacts' normal springs (dampers.py, share rows) of the steps since the last advance, and
-        # those of the advance in progress: used only by an advance of one DEM step, so never pending at a
-        # checkpoint that matters (a longer window drops them).
+        # The blended contacts' normal springs (dampers.py, share rows) of the steps since the last advance, kept,
+        # checkpointed and moved between ranks like the records, and those of the advance in progress.
         self.share_rows = []
         self._advanced_shares = np.zeros((0, SHARE_COLUMNS))
         self.particle_system = None  # set by the simulation: the dashpot balance acts on its particles
@@ -155,7 +154,9 @@ class CoupledSurface(kinds.StateComponent):
             if len(records):
                 self.damper_records.append(records)
             if len(contacts.share_contact):
-                self.share_rows.append(make_share_rows(contacts.particle, self.particle_system.state.ids,
+                # ids per contact, as make_records takes them (the rows are indexed by the contact's record).
+                self.share_rows.append(make_share_rows(contacts.particle,
+                                                       self.particle_system.state.ids[contacts.particle],
                                                        contacts.share_contact, contacts.share_vertex,
                                                        contacts.share_value, contacts.damping))
         self.node_forces[:] = 0.0
@@ -191,19 +192,21 @@ class CoupledSurface(kinds.StateComponent):
         records[:, RECORD_DAMPING + 6:RECORD_DAMPING + 9] -= frame
         records[:, RECORD_DAMPING + 9:RECORD_DAMPING + 12] -= frame
 
-    def send_forces_to_solid(self, scale: float, dampers: bool = True, interval: float = 0.0, steps: int = 1) -> None:
+    def send_forces_to_solid(self, scale: float, dampers: bool = True, interval: float = 0.0, steps: int = 1,
+                             springs: bool = False) -> None:
         """Add scale x the accumulated forces to the solid's nodal loads (ADD_VALUES to the owners).
 
         dampers: the kept contacts' dashpots go to the solid as nodal dashpots (scaled alike) and leave
         the held load; without, the held load keeps them (the prime, whose impulse is F^0 dt exactly).
         A moving frame (interval: the coming advance's, steps: the window's DEM steps) books the work of the
-        last advance's frame displacement now that the force after it is known (_book_frame_work)."""
+        last advance's frame displacement now that the force after it is known (_book_frame_work).  The contact
+        springs over the FE sub-steps act on an advance of one DEM step, and on a longer one with `springs`."""
         forces = scale * self.accumulated_forces
         if self.frame is not None:
             self._book_frame_work(self.accumulated_forces / steps)
         records = np.concatenate(self.damper_records) if self.damper_records else np.zeros((0, RECORD_COLUMNS))
         self.damper_records = []
-        with_springs = dampers and self.frame is None and steps == 1
+        with_springs = dampers and self.frame is None and (steps == 1 or springs)
         shares = (np.concatenate(self.share_rows) if self.share_rows and with_springs
                   else np.zeros((0, SHARE_COLUMNS)))
         self.share_rows = []
@@ -216,9 +219,8 @@ class CoupledSurface(kinds.StateComponent):
             tensors = np.zeros((len(self.node_indices), 6))
             targets = np.zeros((len(self.node_indices), 3))
             previous_forces = np.zeros((len(self.node_indices), 3))
-            # The contact springs over the sub-steps (dampers.py), for an advance of one DEM step: over a window of
-            # several (fem_every > 1) the particles move too and the held force has its own limit (check.py); a
-            # solid with motion keeps the held force alone.
+            # The contact springs over the sub-steps (dampers.py), each record's by its share of the window; a solid
+            # with motion keeps the held force alone.
             springs = np.zeros((len(self.node_indices) if with_springs else 0, 6))
             node_dampers(records, self.triangles, scale, tensors, targets, previous_forces, springs)
             if len(shares):
@@ -276,10 +278,16 @@ class CoupledSurface(kinds.StateComponent):
                 local_index = np.concatenate([local_index[local_index >= 0],
                                               self._local_index(shared, state, by_id_only=True)])
         spring_integrals = self._spring_integrals()
-        if len(shares) and len(spring_integrals):
-            # Share rows exist only for an advance of one DEM step, whose particles stayed on their rank.
-            balance_share_springs(shares, self._local_index(shares, state), spring_integrals,
-                                  self._advanced_spring_scale, state.velocities, state.mass)
+        if len(spring_integrals) and (len(shares) or exchange):
+            share_index = self._local_index(shares, state)
+            if exchange:
+                shared = allgather_rows(system.comm, shares[share_index < 0], SHARE_COLUMNS)
+                if len(shared):
+                    shares = np.concatenate([shares[share_index >= 0], shared])
+                    share_index = np.concatenate([share_index[share_index >= 0],
+                                                  self._local_index(shared, state, by_id_only=True)])
+            balance_share_springs(shares, share_index, spring_integrals, self._advanced_spring_scale,
+                                  state.velocities, state.mass)
         if len(records):
             vertex_velocities = (self.triangle_surface.vertex_velocities if self.frame is None
                                  else self._relative_vertex_velocities)
@@ -358,6 +366,9 @@ class CoupledSurface(kinds.StateComponent):
         self._refresh_whole()
         total, records, heat = self._window_sums(self.solid.comm)
         state = {"accumulated_forces": kinds.global_array(total), "damper_records": kinds.global_array(records)}
+        if self.triangle_surface.blended:
+            local = np.concatenate(self.share_rows) if self.share_rows else np.zeros((0, SHARE_COLUMNS))
+            state["share_rows"] = kinds.global_array(allgather_rows(self.solid.comm, local, SHARE_COLUMNS))
         if self.conducting:
             state["accumulated_heat"] = kinds.global_array(heat)
         if self.frame is not None:
@@ -394,6 +405,10 @@ class CoupledSurface(kinds.StateComponent):
         self.refresh_vertices()
         self.accumulated_forces[:] = np.asarray(state["accumulated_forces"]) if comm.rank == 0 else 0.0
         self.restore_records(state["damper_records"], comm)
+        # Rank 0 keeps the window's share rows too (a checkpoint without them: none were pending, or an older
+        # version's, whose records carried the blended contacts' normal springs).
+        shares = np.asarray(state.get("share_rows", np.zeros((0, SHARE_COLUMNS))), dtype=float).reshape(-1, SHARE_COLUMNS)
+        self.share_rows = [shares.copy()] if len(shares) and comm.rank == 0 else []
         self.dissipation_correction_local = 0.0
         if (self.frame is not None) != ("frame_work" in state):
             raise kinds.StateMismatch(f"solid '{self.name}': motion: differs between this scene and the checkpoint")

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pdemfem import state_dict as kinds
+
 
 class HistoryWriter:
     def __init__(self, path: Path, columns: list, is_writer: bool, append: bool = False):
@@ -38,12 +40,14 @@ class HistoryWriter:
             self._file = None
 
 
-class IntervalMean:
+class IntervalMean(kinds.StateComponent):
     """The mean of a quantity over the steps since it was last taken (a history row's output interval).
 
     `add` once per step; `take` returns the mean and starts the next interval.  Taken again with no
     step in between (two rows at one step), it repeats the last mean; before any step it returns
-    `fallback` (the value now)."""
+    `fallback` (the value now).  A checkpoint keeps the interval so far (the same on every rank: it adds
+    the sums over the ranks), so the first row after a restart averages the whole interval, as the run
+    without the restart did."""
 
     def __init__(self):
         self._sum = None
@@ -56,6 +60,17 @@ class IntervalMean:
             self._sum = np.zeros_like(values)
         self._sum += values
         self._steps += 1
+
+    def state_dict(self) -> dict:
+        return {"sum": kinds.global_array(np.zeros(0) if self._sum is None else self._sum),
+                "steps": kinds.scalar(int(self._steps)),
+                "last": kinds.global_array(np.zeros(0) if self._last is None else self._last)}
+
+    def load_state_dict(self, state: dict) -> None:
+        total, last = np.asarray(state["sum"], dtype=float), np.asarray(state["last"], dtype=float)
+        self._sum = total.copy() if total.size else None
+        self._steps = int(state["steps"])
+        self._last = last.copy() if last.size else None
 
     def take(self, fallback):
         if self._steps:

@@ -231,6 +231,7 @@ class SimulationIO:
         components.update({name: component for name, component in (("streams", sim.streams), ("outlets", sim.outlets))
                            if component is not None})
         components["particles"] = sim.particle_system
+        components[OPTIONAL_COMPONENT] = sim.surface_force_means
         return components
 
     def write_checkpoint(self) -> Path:
@@ -293,6 +294,8 @@ class SimulationIO:
                                   "restart with the scene that wrote the checkpoint")
         fix = "restart with the scene (walls, solids) that wrote the checkpoint"
         components = self.components()
+        if OPTIONAL_COMPONENT not in state:  # an older version's checkpoint: the first row averages from the restart
+            components.pop(OPTIONAL_COMPONENT)
         missing = [name for name in components if name not in state]
         if missing:
             raise CheckpointError(where, f"lacks the state of {', '.join(missing)} (in this scene)", fix)
@@ -338,6 +341,10 @@ class SimulationIO:
 
 
 # ====================================================================== helpers
+
+
+# The history rows' interval means of the surface forces: a checkpoint of an older version lacks them.
+OPTIONAL_COMPONENT = "surface_force_means"
 
 
 def _truncate_history(path: Path, step: int) -> None:

@@ -1,7 +1,8 @@
 """MPI case: coupled scenes on any rank count, gathered by particle id (tests/test_coupling_parallel.py).
 
 usage: coupling_agreement.py OUT.npz CASE STEPS [ulp]
-CASE: ball (ball on block, P1) or pile (pile on plate, P2).  Writes (rank 0) particle positions and
+CASE: ball (ball on block, P1), pile (pile on plate, P2), pile_blended (the same with the blended gap) or
+pile_window (fem_every 3).  Writes (rank 0) particle positions and
 velocities by id, the surface force, the support reaction and the solid's surface node positions.
 "ulp" (serial) shifts every particle's x by one unit in the last place of the largest coordinate: the
 round-off growth reference.
@@ -35,6 +36,9 @@ def main():
         name, supports = "plate", ["xmin", "xmax", "ymin", "ymax"]
     else:
         scene, name, supports = pile_on_plate(element="P2", count=120, cells=(3, 3, 1)), "plate", ["xmin", "xmax"]
+        if case == "pile_blended":
+            # The blended gap: its contact springs over the plate's FE sub-steps are balanced on their particles.
+            scene.setdefault("coupling", {})["transfer"] = "blended"
     from petsc4py import PETSc
 
     # The solids' static start converged far below the default rtol 1e-10 (a decade above the residual's
