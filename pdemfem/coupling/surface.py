@@ -269,23 +269,10 @@ class CoupledSurface(kinds.StateComponent):
         if system is None:
             return
         state = system.state
-        local_index = self._local_index(records, state)
-        if exchange:
-            # A record no rank owns any more (its particle was lost) is dropped with the particle.
-            shared = allgather_rows(system.comm, records[local_index < 0], RECORD_COLUMNS)
-            if len(shared):
-                records = np.concatenate([records[local_index >= 0], shared])
-                local_index = np.concatenate([local_index[local_index >= 0],
-                                              self._local_index(shared, state, by_id_only=True)])
+        records, local_index = self._rows_where_owned(records, RECORD_COLUMNS, system, exchange)
         spring_integrals = self._spring_integrals()
         if len(spring_integrals) and (len(shares) or exchange):
-            share_index = self._local_index(shares, state)
-            if exchange:
-                shared = allgather_rows(system.comm, shares[share_index < 0], SHARE_COLUMNS)
-                if len(shared):
-                    shares = np.concatenate([shares[share_index >= 0], shared])
-                    share_index = np.concatenate([share_index[share_index >= 0],
-                                                  self._local_index(shared, state, by_id_only=True)])
+            shares, share_index = self._rows_where_owned(shares, SHARE_COLUMNS, system, exchange)
             balance_share_springs(shares, share_index, spring_integrals, self._advanced_spring_scale,
                                   state.velocities, state.mass)
         if len(records):
@@ -295,6 +282,19 @@ class CoupledSurface(kinds.StateComponent):
                 records, local_index, self.triangles, vertex_velocities, dt,
                 state.velocities, state.angular_velocities, state.mass, state.inverse_inertia,
                 spring_integrals, self._advanced_spring_scale)
+
+    def _rows_where_owned(self, rows, columns: int, system, exchange: bool) -> tuple:
+        """(rows, the row of each one's particle among this rank's owned ones, -1 where not owned here).
+        exchange (collective): rows whose particle this rank does not own are shared with all ranks and kept
+        where it lives; a row no rank owns any more (its particle was lost) is dropped with the particle."""
+        state = system.state
+        index = self._local_index(rows, state)
+        if exchange:
+            shared = allgather_rows(system.comm, rows[index < 0], columns)
+            if len(shared):
+                rows = np.concatenate([rows[index >= 0], shared])
+                index = np.concatenate([index[index >= 0], self._local_index(shared, state, by_id_only=True)])
+        return rows, index
 
     def _spring_integrals(self) -> np.ndarray:
         """Collective (on every rank alike: the sub-step count is the solid's): per vertex, the time integral of

@@ -198,6 +198,7 @@ class Solid(kinds.StateComponent):
         self.heat = None  # the heat equation (heat.SolidHeat) when this solid conducts heat
         self.thermoelastic_work = 0.0  # strain energy the temperature changes of the heat path put in [J]
         self._critical_step = None
+        self._corner_volumes = None  # the owned cells' undeformed corner-tetrahedron volumes (smallest_volume_ratio)
         self._omega_bound = None
         self._static_solver = None
         self._mass_solver = None
@@ -807,14 +808,9 @@ class Solid(kinds.StateComponent):
         over all ranks.  A cell turned inside out is beyond what the small-strain model describes; its faces no
         longer bound the solid, so particles can pass through (the run monitor stops there)."""
         corners = self.mesh.cells[:self.mesh.n_owned_cells, :4]
-        reference = self.mesh.points
-        deformed = reference + local_values(self.displacement_vec, 3)
-        volumes = []
-        for points in (reference, deformed):
-            a = points[corners[:, 0]]
-            volumes.append(np.einsum("ij,ij->i", np.cross(points[corners[:, 1]] - a, points[corners[:, 2]] - a),
-                                     points[corners[:, 3]] - a))
-        ratios = volumes[1] / volumes[0]
+        if self._corner_volumes is None:
+            self._corner_volumes = _corner_volumes(self.mesh.points, corners)
+        ratios = _corner_volumes(self.mesh.points + local_values(self.displacement_vec, 3), corners) / self._corner_volumes
         local = np.array([ratios.min() if len(ratios) else np.inf, -float(np.count_nonzero(ratios <= 0.0))])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.MIN)  # the count's negative: MIN gives the largest
@@ -853,3 +849,9 @@ class Solid(kinds.StateComponent):
             return body_positions, body_velocities
         return (self.frame.to_world(body_positions, self.time),
                 self.frame.world_velocities(body_positions, body_velocities, self.time))
+
+
+def _corner_volumes(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Six times the signed volume of each cell's corner tetrahedron."""
+    a = points[corners[:, 0]]
+    return np.einsum("ij,ij->i", np.cross(points[corners[:, 1]] - a, points[corners[:, 2]] - a), points[corners[:, 3]] - a)

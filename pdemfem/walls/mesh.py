@@ -339,7 +339,8 @@ class TriangleSurface(ContributorWall):
     def contacts(self) -> SimpleNamespace:
         """This rank's contacts of the last force evaluation (views): particle index, triangle,
         barycentric weights of the contact point, contact point, force on the surface, and the
-        dashpot record (c_n, c_t, normal, lever, particle and surface velocity at the contact point)."""
+        dashpot record (c_n, c_t, normal, lever, particle and surface velocity at the contact point), and the
+        blended contacts' spring shares (share_contact: the contact's row, share_vertex, share_value: S_n b_v)."""
         n = min(self.contact_count, len(self._records.particle))
         r = self._records
         shares = self.share_count
