@@ -317,12 +317,12 @@ def likely_causes(scene, dt: float, fastest: float, smallest_radius: float, thin
         causes.append(f"dt = {dt:.3g} s is {dt / rayleigh:.2f} x the Rayleigh time {rayleigh:.3g} s, above the "
                       f"elastic wave limit {derived.RAYLEIGH_LIMIT} (use dt: auto)")
     speed = max(derived.expected_impact_speed(scene), fastest if math.isfinite(fastest) else 0.0)
-    resolvable = 0.0 < speed < math.inf and rayleigh is not None
+    resolvable = speed < math.inf and rayleigh is not None
     for limit, why in derived.contact_step_limits(scene, speed) if resolvable else []:
         if dt > limit:
             if why.startswith("dashpot"):
                 causes.append(f"the restitution is too small for the step: the {why} needs dt <= {limit:.3g} s "
-                              f"at {speed:.3g} m/s (use dt: auto, or raise the restitution)")
+                              f"(use dt: auto, or raise the restitution)")
             else:
                 causes.append(f"dt is above the contact limit: {why} needs dt <= {limit:.3g} s (use dt: auto)")
     if thin_surfaces and math.isfinite(fastest) and fastest * dt > derived.TUNNEL_TRAVEL * smallest_radius:

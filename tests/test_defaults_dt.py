@@ -118,6 +118,38 @@ def test_dashpot_stability_limit_of_the_linearised_contact():
     assert growth(1.01 * limit) > 1.0e3  # grows geometrically above it
 
 
+def test_dt_auto_keeps_a_resting_contact_with_little_restitution_dissipative(tmp_path):
+    """A sphere set on a floor at rest, e = 1e-4 (gamma = 91): nothing falls, so the impact speed is 0, but
+    its contact with the floor still has a dashpot.  At the step dt: auto used to take (0.2 Rayleigh
+    times, 4.4 x the resting contact's dashpot limit) the sphere chattered for ever and the dashpot booked
+    -6.1e-10 J by 0.05 s (-1.2e-8 J by 1 s, 13 % of m g r), energy it put into the motion.  Dashpots only
+    dissipate: the booked dissipation may not fall below 0 (1e-9 m g delta: round-off of the per-step
+    sums), and the sphere creeps to rest (overdamped: its kinetic energy only falls, where the chatter's rose and
+    fell from step to step)."""
+    scene = {"time": {"end": 0.02, "dt": "auto"}, "gravity": [0, 0, -9.81], "materials": {"glass": GLASS},
+             "interactions": {"default": {"model": "hertz_mindlin", "restitution": 1.0e-4, "friction": 0.5}},
+             "particles": [{"name": "p", "material": "glass", "radius": RADIUS,
+                            "insert": {"kind": "list", "positions": [[0, 0, RADIUS]]}}],
+             "walls": [_floor()], "output": {"every": 0.002}}
+    loaded = load_scene(scene)[0]
+    assert "dashpot stability" in derived.time_step_choice(loaded)[1]
+    simulation = Simulation.from_dict(scene, base_dir=tmp_path, output_dir=tmp_path / "out")
+    mass = GLASS["density"] * 4.0 / 3.0 * math.pi * RADIUS**3
+    # Hertz's static overlap under the sphere's weight: m g = 4/3 E* sqrt(R) delta^1.5.
+    modulus = GLASS["youngs_modulus"] / (2.0 * (1.0 - GLASS["poisson_ratio"] ** 2))
+    delta = (0.75 * mass * 9.81 / (modulus * math.sqrt(RADIUS))) ** (2.0 / 3.0)
+    scale = mass * 9.81 * delta
+    dissipated, kinetic = [], []
+    while simulation.time < 0.02:
+        simulation.step(2000)
+        energies = simulation.energies()
+        dissipated.append(energies["dissipated_energy"])
+        kinetic.append(energies["kinetic_energy"])
+    assert min(dissipated) > -1e-9 * scale, (min(dissipated) / scale)
+    assert dissipated[-1] > 0.3 * scale  # released: 0.6 m g delta at rest (the rest stays elastic)
+    assert all(later < earlier for earlier, later in zip(kinetic, kinetic[1:])), kinetic
+
+
 def test_dt_auto_without_particles_takes_the_solids_critical_step(tmp_path):
     scene = {"time": {"end": 2.0e-5, "dt": "auto"}, "gravity": [0, 0, -9.81],
              "materials": {"alu": {"density": 2700, "youngs_modulus": 7.0e10, "poisson_ratio": 0.33}},

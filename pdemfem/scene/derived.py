@@ -217,16 +217,23 @@ def damping_stable_step(scene: Scene, speed: float) -> Optional[Tuple[float, str
     sqrt(S_n / m*) (the dashpot is gamma sqrt(m* S_n)).  Tangential, while friction holds the
     contact: the spring S_t and dashpot gamma sqrt(m* S_t) act on the rolling-coupled mass
     2/7 m* of two solid spheres (or a sphere on a wall).  The step must satisfy
-    (omega dt)^2 + 2 beta dt <= 4 for both (`_explicit_damped_limit`)."""
+    (omega dt)^2 + 2 beta dt <= 4 for both (`_explicit_damped_limit`).  A linear spring without a
+    normal_stiffness has the one the contact tables derive from `expected_impact_speed`, whatever `speed`."""
     if speed <= 0.0:
         return None
     best = None
+    characteristic = expected_impact_speed(scene)
     for kind, name_a, name_b, m_eff, r_eff, e_eff, g_eff in _pairs(scene, with_shear=True):
         interaction = scene.interaction(name_a, name_b)
         gamma = normal_damping_coefficient(interaction.model, interaction.restitution)
         delta = _peak_overlap(m_eff, r_eff, e_eff, speed)
         if interaction.model == "linear_spring_dashpot":
-            stiffness = interaction.normal_stiffness or m_eff * speed**2 / delta**2
+            if interaction.normal_stiffness:
+                stiffness = interaction.normal_stiffness
+            elif characteristic > 0.0:
+                stiffness = m_eff * characteristic**2 / _peak_overlap(m_eff, r_eff, e_eff, characteristic)**2
+            else:
+                continue  # no stiffness at all: the contact tables refuse the scene
             tangential = interaction.tangential_stiffness_ratio * stiffness
         else:
             contact_radius = math.sqrt(r_eff * delta)
@@ -244,10 +251,29 @@ def damping_stable_step(scene: Scene, speed: float) -> Optional[Tuple[float, str
     return best
 
 
+def settling_speed(scene: Scene) -> float:
+    """sqrt(4 |g| r_min): the speed of a drop by one diameter of the smallest particle, the agitation of a
+    pile settling under gravity (0 without gravity or particles).  Its impact's peak overlap is the static
+    overlap under ~175 times the particle's weight: the contacts at the bottom of a resting pile are no
+    stiffer than that."""
+    if not scene.particles:
+        return 0.0
+    smallest = min(group_radius_range(group)[0] for group in scene.particles)
+    return math.sqrt(4.0 * _norm(scene.gravity) * smallest)
+
+
 def contact_step_limits(scene: Scene, speed: float) -> List[Tuple[float, str]]:
     """[(dt limit, why)] a contact at impact speed `speed` puts on the step: its duration over the
-    steps it needs (`steps_per_contact_required`), and dashpot stability (`damping_stable_step`)."""
+    steps it needs (`steps_per_contact_required`), and dashpot stability (`damping_stable_step`).  The
+    dashpot must also stay stable in the contacts of particles at rest under gravity, whatever the impact
+    speed (a resting sphere with e = 1e-4 chattered for ever and booked negative dissipation): its limit
+    is taken at least at the `settling_speed`."""
     limits = []
+    dashpot_speed = max(speed, settling_speed(scene))
+    stable = damping_stable_step(scene, dashpot_speed)
+    if stable is not None:
+        limits.append((stable[0], f"dashpot stability of {stable[1]} at {dashpot_speed:.3g} m/s"
+                                  + (" (particles settling under gravity)" if dashpot_speed > speed else "")))
     if speed <= 0.0:
         return limits
     for kind, name_a, name_b, m_eff, r_eff, e_eff in _pairs(scene):
@@ -257,9 +283,6 @@ def contact_step_limits(scene: Scene, speed: float) -> List[Tuple[float, str]]:
         limits.append((duration / steps, f"{steps:.0f} steps per {kind.replace('_', '-')} contact "
                                          f"({name_a}-{name_b}, {duration:.3g} s at {speed:.3g} m/s, "
                                          f"restitution {interaction.restitution:g})"))
-    stable = damping_stable_step(scene, speed)
-    if stable is not None:
-        limits.append((stable[0], f"dashpot stability of {stable[1]}"))
     return limits
 
 
@@ -734,23 +757,23 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
         found.append(f"the impact speed is {speed:g} m/s: an initial velocity's square overflows; the run stops "
                      f"at once (non-finite energy): check the particles' initial velocities")
         return found
+    limits = contact_step_limits(scene, speed)
+    # The binding (smallest) limit of each kind: resolution and dashpot stability.
+    binding = [min(((limit, why) for limit, why in limits if why.startswith("dashpot") == dashpot),
+                   default=None) for dashpot in (False, True)]
+    for limit, why in [choice for choice in binding if choice is not None]:
+        if dt > limit * (1.0 + 1e-9):  # 1e-9: dt auto equals its binding limit up to round-off
+            if why.startswith("dashpot"):
+                found.append(
+                    f"dt = {dt:.3g} s is above the {why}: the contact can gain energy and blow up "
+                    f"(need dt <= {limit:.3g} s; use dt: auto, or raise the restitution)"
+                )
+            else:
+                found.append(
+                    f"dt = {dt:.3g} s is above the {why} (need dt <= {limit:.3g} s): the restitution comes out "
+                    f"wrong by more than 1 %; use dt: auto, or lower time.dt_factor or time.dt"
+                )
     if speed > 0.0:
-        limits = contact_step_limits(scene, speed)
-        # The binding (smallest) limit of each kind: resolution and dashpot stability.
-        binding = [min(((limit, why) for limit, why in limits if why.startswith("dashpot") == dashpot),
-                       default=None) for dashpot in (False, True)]
-        for limit, why in [choice for choice in binding if choice is not None]:
-            if dt > limit * (1.0 + 1e-9):  # 1e-9: dt auto equals its binding limit up to round-off
-                if why.startswith("dashpot"):
-                    found.append(
-                        f"dt = {dt:.3g} s is above the {why}: the contact can gain energy and blow up "
-                        f"(need dt <= {limit:.3g} s at {speed:.3g} m/s; use dt: auto, or raise the restitution)"
-                    )
-                else:
-                    found.append(
-                        f"dt = {dt:.3g} s is above the {why} (need dt <= {limit:.3g} s): the restitution comes out "
-                        f"wrong by more than 1 %; use dt: auto, or lower time.dt_factor or time.dt"
-                    )
         if speed * dt > MAX_STEP_TRAVEL * smallest_radius:
             found.append(
                 f"at the impact speed {speed:.3g} m/s a particle moves {speed * dt / smallest_radius:.2f} radii per "
@@ -825,8 +848,7 @@ def thermal_step_limit(scene: Scene) -> Optional[Tuple[float, str]]:
     smallest particle: the agitation of a pile settling); None with heat off or no particles."""
     if not scene.heat_enabled or not scene.particles:
         return None
-    smallest = min(group_radius_range(group)[0] for group in scene.particles)
-    speed = max(expected_impact_speed(scene), math.sqrt(4.0 * _norm(scene.gravity) * smallest))
+    speed = max(expected_impact_speed(scene), settling_speed(scene))
     if not (0.0 < speed < math.inf):
         return None
     best = {}
