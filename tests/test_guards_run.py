@@ -143,6 +143,76 @@ def test_sphere_started_behind_a_plane_is_a_scene_error(capsys, workdir):
     assert not (workdir / "out").exists()
 
 
+# A 1 mm soft glass bead set at its static Hertz overlap on the floor: delta = (3 m g / (4 E* sqrt(R)))^(2/3)
+# = 9.25e-7 m (E* = E / (2 (1 - nu^2)), m = 1.047e-5 kg): 9.25e-4 radii, a settled packing's overlap.
+RESTING_BEAD = f"""\
+time: {{end: 0.01, dt: auto}}
+gravity: [0, 0, -9.81]
+materials:
+  {SOFT_GLASS}
+interactions:
+  default: {{model: hertz_mindlin, restitution: 0.5, friction: 0.5}}
+particles:
+  - name: bead
+    material: glass
+    radius: 0.001
+    insert: {{kind: list, positions: [[0, 0, 0.000999075]]}}
+walls:
+  - {{name: floor, kind: plane, point: [0, 0, 0], normal: [0, 0, 1], material: glass}}
+output: {{dir: out, every: 0.001}}
+"""
+
+
+def test_a_bead_started_at_its_resting_overlap_runs_and_stays_at_rest(capsys, workdir):
+    """The monitor counted the starting overlap's elastic energy (3.8e-11 J here) as created and stopped the
+    run at step 0 as diverged, and `check` warned that the bead starts inside the floor.  Starting overlaps
+    up to 0.05 radii are accepted (deeper ones are refused before the run), so their energy is available."""
+    (workdir / "scene.yaml").write_text(RESTING_BEAD)
+    assert cli.main(["check", str(workdir / "scene.yaml")]) == 0
+    out, _ = capsys.readouterr()
+    assert "warnings: none" in out, out
+    code, _, err = run_cli(capsys, workdir, RESTING_BEAD)
+    assert code == 0, err
+    rows = history(workdir)
+    assert float(rows[-1]["time"]) >= 0.01
+    weight_work = 2500 * 4.0 / 3.0 * math.pi * 1e-9 * 9.81 * 9.25e-7  # m g delta
+    # At rest: the placed overlap is Hertz's to ~1e-4, so the bead rings with ~(1e-4)^2 of m g delta.
+    assert max(float(row["kinetic_energy"]) for row in rows) < 1e-6 * weight_work
+
+
+# Two 1 mm beads listed with their centres OVERLAP radii closer than touching, no gravity, e = 1.
+PRESSED_PAIR = f"""\
+time: {{end: 0.002, dt: auto}}
+gravity: [0, 0, 0]
+materials:
+  {SOFT_GLASS}
+interactions:
+  default: {{model: hertz_mindlin, restitution: 1.0, friction: 0.0}}
+particles:
+  - name: pair
+    material: glass
+    radius: 0.001
+    insert: {{kind: list, positions: [[0, 0, 0], [GAP, 0, 0]]}}
+output: {{dir: out, every: 0.0002}}
+"""
+
+
+def test_listed_particles_may_start_at_contact_overlaps_and_their_energy_is_kept(capsys, workdir):
+    """A settled packing listed by its positions has contact overlaps of 1e-3..1e-2 radii: accepted up to 0.05
+    of the smaller radius (as against a wall), and the run starts with their elastic energy: released by the
+    undamped pair, it comes back as kinetic energy (velocity Verlet's error at ~30 steps per contact: ~1e-3)."""
+    code, _, err = run_cli(capsys, workdir, PRESSED_PAIR.replace("GAP", repr(0.002 - 0.01 * 0.001)))
+    assert code == 0, err
+    rows = history(workdir)
+    elastic = float(rows[0]["elastic_energy"])
+    assert elastic > 0.0 and float(rows[-1]["contacts"]) == 0
+    assert float(rows[-1]["kinetic_energy"]) == pytest.approx(elastic, rel=1e-2)
+    (workdir / "out").rename(workdir / "first")
+    code, _, err = run_cli(capsys, workdir, PRESSED_PAIR.replace("GAP", repr(0.002 - 0.06 * 0.001)))
+    assert code == 2 and "particles 0 and 1 overlap at insertion" in err and "0.05 of the smaller radius" in err
+    assert not (workdir / "out").exists()
+
+
 def test_overflowing_velocity_stops_with_explicit_dt_and_is_refused_with_dt_auto(capsys, workdir):
     code, _, err = run_cli(capsys, workdir, OVERFLOW.replace("DT", "2.0e-5"))
     assert code == 3, err

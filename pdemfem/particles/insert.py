@@ -19,6 +19,7 @@ from pdemfem.clumps.insert import place_clump_group
 from pdemfem.errors import SceneError
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
 from pdemfem.particles.placement_grid import overlaps_stored, store_sphere
+from pdemfem.scene.inputs import START_OVERLAP_TOLERANCE
 
 
 @dataclass
@@ -77,9 +78,9 @@ def _first_overlap(positions, radii, labels, cells, starts, dimensions, toleranc
     return -1, -1
 
 
-def first_overlap(positions: np.ndarray, radii: np.ndarray, labels=None):
-    """Indices (i, j) of some overlapping pair, or None.  `labels`: clump of each sphere (-1: none);
-    members of one clump are not a pair."""
+def first_overlap(positions: np.ndarray, radii: np.ndarray, labels=None, tolerance: float = OVERLAP_TOLERANCE):
+    """Indices (i, j) of some pair overlapping by more than `tolerance` of the smaller radius, or None.
+    `labels`: clump of each sphere (-1: none); members of one clump are not a pair."""
     if len(radii) < 2:
         return None
     labels = np.full(len(radii), -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
@@ -89,7 +90,7 @@ def first_overlap(positions: np.ndarray, radii: np.ndarray, labels=None):
     sorted_cells = np.ascontiguousarray(cells[order])
     starts = cell_starts(sorted_cells, int(np.prod(dimensions)))
     i, j = _first_overlap(np.ascontiguousarray(positions[order]), np.ascontiguousarray(radii[order]),
-                          np.ascontiguousarray(labels[order]), sorted_cells, starts, dimensions, OVERLAP_TOLERANCE)
+                          np.ascontiguousarray(labels[order]), sorted_cells, starts, dimensions, tolerance)
     if i < 0:
         return None
     return int(order[i]), int(order[j])
@@ -230,9 +231,13 @@ def insert_particles(scene) -> InsertedParticles:
         combined_radii = np.concatenate([placed_radii, group_radii])
         combined_labels = np.concatenate([placed_labels, group_labels])
         if insert.kind != "random":
-            overlap = first_overlap(combined_positions, combined_radii, combined_labels)
+            # Listed positions may carry a settled packing's contact overlaps (1e-3..1e-2 radii), as against a
+            # wall (pdemfem.scene.inputs); deeper ones would shoot the pair apart at step 0.
+            overlap = first_overlap(combined_positions, combined_radii, combined_labels,
+                                    START_OVERLAP_TOLERANCE if insert.kind == "list" else OVERLAP_TOLERANCE)
             if overlap is not None:
-                raise SceneError(where, _describe_overlap(scene, overlap, combined_positions, combined_radii),
+                raise SceneError(where, _describe_overlap(scene, overlap, combined_positions, combined_radii,
+                                                          insert.kind == "list"),
                                  "move the positions apart (distance >= sum of radii) or shrink the radii"
                                  if group.clump is None else
                                  "move the clumps apart (their spheres must not overlap another clump's), or turn "
@@ -279,8 +284,10 @@ def _random_positions(group, radii, placed_positions, placed_radii, where):
     return positions
 
 
-def _describe_overlap(scene, overlap, positions, radii):
+def _describe_overlap(scene, overlap, positions, radii, listed=False):
     i, j = overlap
     distance = float(np.linalg.norm(positions[i] - positions[j]))
+    allowed = (f", by more than the {START_OVERLAP_TOLERANCE:g} of the smaller radius a settled packing's contacts "
+               f"may start with" if listed else "")
     return (f"particles {i} and {j} overlap at insertion (centre distance {distance:g} m < "
-            f"radius sum {radii[i] + radii[j]:g} m; indices count across groups in scene order)")
+            f"radius sum {radii[i] + radii[j]:g} m{allowed}; indices count across groups in scene order)")

@@ -878,13 +878,14 @@ def _wall_conducts(scene: Scene, material: str) -> bool:
 
 
 def start_inside_walls(scene: Scene) -> List[str]:
-    """Groups whose particles can start touching or behind a plane wall (the wall pushes them
-    out with the energy of the whole overlap)."""
+    """Groups inserted in a region that reaches behind a plane wall (the wall pushes such particles
+    out with the energy of the whole overlap).  Listed positions are checked one by one when the run
+    starts (pdemfem.scene.inputs refuses overlaps past 0.05 radii; a particle resting at its static
+    overlap is meant, and not warned about)."""
     found = []
     for index, group in enumerate(scene.particles):
-        largest = group_reach(group)
         for wall in _plane_walls(scene):
-            if _points_behind_wall(group, wall, largest):
+            if _region_behind_wall(group, wall):
                 found.append(
                     f"particles[{index}] ({group.name}) starts partly behind or inside wall '{wall.name}' "
                     f"(normal points into the domain): move the region or the wall"
@@ -1007,16 +1008,12 @@ def contact_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str, str, 
     return _merged_surfaces(entries)
 
 
-def _points_behind_wall(group: ParticleGroupConfig, wall: WallConfig, radius: float) -> bool:
-    """True when some particle of the group can start touching or behind the plane wall."""
+def _region_behind_wall(group: ParticleGroupConfig, wall: WallConfig) -> bool:
+    """True when the group's insertion region reaches behind the plane wall (False for listed positions)."""
+    if group.insert.kind == "list":
+        return False
     length = _norm(wall.normal)
     normal = tuple(c / length for c in wall.normal)
-    insert = group.insert
-    if insert.kind == "list":
-        radii = insert.radii or [radius] * len(insert.positions or ())
-        return any(
-            _dot(normal, position) - _dot(normal, wall.point) < r for position, r in zip(insert.positions or (), radii)
-        )
     # Region boxes bound the particles themselves (centres lie at least a radius inside).
     return any(_dot(normal, corner) - _dot(normal, wall.point) < -1e-12 * max(1.0, abs(_dot(normal, corner)))
                for corner in _group_points(group))
