@@ -24,7 +24,7 @@ from pdemfem.errors import SceneError, SolverError
 from pdemfem.io.history import IntervalMean
 from pdemfem.io.simulation_io import SimulationIO
 from pdemfem.monitor import DivergenceMonitor
-from pdemfem.parallel.api_safety import collective_errors, private_communicators
+from pdemfem.parallel.api_safety import abort_on_uncaught_exceptions, collective_errors, private_communicators
 from pdemfem.particles.heat import material_heat_capacities
 from pdemfem.particles.insert import insert_particles
 from pdemfem.particles.outlet import Outlets
@@ -52,6 +52,7 @@ class Simulation:
     def __init__(self, scene, base_dir: Path, comm=None, output_dir=None, restart=None, force: bool = False):
         # Private duplicates of the user's communicator (pdemfem.parallel.api_safety).
         self.comm, self.error_comm = private_communicators(comm if comm is not None else MPI.COMM_WORLD)
+        abort_on_uncaught_exceptions(self.comm)
         self.scene = scene
         self.base_dir = Path(base_dir)
         self.output_dir = output_directory(scene, self.base_dir, output_dir)

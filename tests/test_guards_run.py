@@ -363,6 +363,33 @@ def test_divergence_under_mpi_stops_every_rank_with_exit_3_and_one_message(workd
     assert completed.stderr.count("warning: time.dt = 0.001 s") == 1, completed.stderr
 
 
+# A user's script whose rank 1 fails in a local query (a misspelt wall) while rank 0 steps on.
+ONE_RANK_FAILS = """\
+import sys
+from mpi4py import MPI
+from pdemfem import Simulation
+simulation = Simulation.from_file(sys.argv[1])
+simulation.step(5)
+simulation.wall_force("flor" if MPI.COMM_WORLD.rank == 1 else "floor")
+simulation.step(5)
+"""
+
+
+@pytest.mark.mpi
+def test_an_error_on_one_rank_of_a_script_aborts_the_job_instead_of_hanging(workdir):
+    """Rank 1's KeyError ended its script, rank 0 waited in the next step's collective, and rank 1 in MPI's
+    finalisation: the job hung until killed.  Now the uncaught exception aborts the job (exit 1, the
+    traceback and which rank)."""
+    (workdir / "scene.yaml").write_text(RESTING_BEAD)
+    (workdir / "script.py").write_text(ONE_RANK_FAILS)
+    command = mpiexec_command(2, [sys.executable, str(workdir / "script.py"), str(workdir / "scene.yaml")])
+    completed = subprocess.run(command, env=process_environment(), cwd=workdir, capture_output=True, text=True,
+                               timeout=120)
+    assert completed.returncode != 0, completed.stderr
+    assert "no wall named 'flor'" in completed.stderr, completed.stderr
+    assert "(rank 1 of 2) the exception above ended this rank" in completed.stderr, completed.stderr
+
+
 # Two soft steel spheres closing head-on at SPEED m/s (dt auto).  The Hertz peak overlap of the impact
 # scales as E^(-2/5): 3 radii at E = 1 MPa, 0.48 at 100 MPa, 0.19 at 1 GPa.
 CLOSING_PAIR = """\

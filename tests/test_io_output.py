@@ -188,3 +188,23 @@ def test_a_history_row_cut_short_by_a_kill_is_dropped_on_restart(tmp_path):
         path.write_text("time,step,particles\n0.0,0,3\n0.001,10,3\n" + cut)
         _truncate_history(path, 100)
         assert path.read_text().splitlines() == ["time,step,particles", "0.0,0,3", "0.001,10,3"], cut
+
+
+def test_a_field_list_without_positions_writes_them_with_the_fields(tmp_path):
+    """`output.particles: [velocities, ids]` ran into a KeyError at the first write (the writer adds the
+    geometry, the arrays handed to it did not): positions are written with any particle field."""
+    from pdemfem import Simulation
+
+    scene = {"time": {"end": 1.0e-4, "dt": 1.0e-5}, "gravity": [0, 0, -9.81],
+             "materials": {"glass": {"density": 2500.0, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3}},
+             "particles": [{"name": "p", "material": "glass", "radius": 0.001,
+                            "insert": {"kind": "list", "positions": [[0, 0, 0.01], [0.003, 0, 0.01]]}}],
+             "output": {"every": 5.0e-5, "particles": ["velocities", "ids"]}}
+    simulation = Simulation.from_dict(scene, base_dir=tmp_path, output_dir=tmp_path / "out")
+    simulation.run(progress=False)
+    with h5py.File(tmp_path / "out" / "particles.h5", "r") as handle:
+        steps = sorted(name for name in handle.keys() if name.startswith("step_"))
+        assert len(steps) == 3
+        last = handle[steps[-1]]
+        assert sorted(last.keys()) == ["ids", "positions", "velocities"]
+        np.testing.assert_allclose(np.sort(last["positions"][:, 0]), [0.0, 0.003])

@@ -122,9 +122,13 @@ class SimulationIO:
 
     def particle_fields(self) -> list:
         """output.particles, without temperature when heat is off (the default list names it; a scene that
-        asks for it explicitly without heat is refused at validation)."""
+        asks for it explicitly without heat is refused at validation), with positions whenever any field is
+        written."""
         heat = self.sim.particle_system.heat
-        return [name for name in self.sim.scene.output.particles if heat or name != "temperature"]
+        fields = [name for name in self.sim.scene.output.particles if heat or name != "temperature"]
+        if fields and "positions" not in fields:  # the geometry: ParticleOutput writes it with any other field
+            fields.insert(0, "positions")
+        return fields
 
     def _prepare_output(self) -> None:
         """Collective, before the first write: refuse to overwrite or mix an earlier run's files

@@ -15,6 +15,11 @@ ranks never leaves the others waiting.
   PDEMFEM_ERROR_SYNC_SECONDS (30 s) -- they wait in a collective the failing rank will never
   join -- the failing rank prints the error with its rank and aborts the job with the error's
   exit code, so no rank hangs (the CLI does the same for the whole command).
+* `abort_on_uncaught_exceptions`: installed when a Simulation is made on several ranks.  An exception that
+  ends a user's script on one rank (a typo in one rank's branch, a failing local query such as
+  `wall_force("flor")`) aborts the job after its traceback is printed.  Without it the rank would reach
+  MPI's finalisation, which waits for the others, while they wait in the next collective step: the job
+  hung until the batch system killed it.  A hook the user installed is left alone.
 """
 from __future__ import annotations
 
@@ -78,3 +83,25 @@ def agree_or_abort(comm, error: BaseException) -> None:
             sys.stderr.flush()
             comm.Abort(code)
         time.sleep(0.002)
+
+
+def abort_on_uncaught_exceptions(comm) -> None:
+    """Make an uncaught exception on one rank abort the whole job (see the module docstring); nothing on one
+    rank, or when sys.excepthook is not Python's own."""
+    if comm is None or comm.size == 1 or sys.excepthook is not sys.__excepthook__:
+        return
+
+    def abort(kind, value, trace):
+        from mpi4py import MPI
+
+        from pdemfem.errors import PdemfemError
+
+        sys.__excepthook__(kind, value, trace)
+        code = getattr(value, "exit_code", 1) if isinstance(value, PdemfemError) else 1
+        sys.stdout.flush()
+        sys.stderr.write(f"error: (rank {MPI.COMM_WORLD.rank} of {MPI.COMM_WORLD.size}) the exception above ended "
+                         f"this rank: aborting the job so that the other ranks do not wait for it forever\n")
+        sys.stderr.flush()
+        MPI.COMM_WORLD.Abort(code)
+
+    sys.excepthook = abort
