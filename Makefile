@@ -8,7 +8,7 @@ DEMO_OUT := out/demo
 DEMO_RANKS := 2
 PYTEST_ARGS ?=
 
-.PHONY: install demo test test-serial benchmark clean
+.PHONY: install demo test benchmark clean
 
 install:
 	@bash scripts/install.sh
@@ -18,8 +18,10 @@ demo: install
 	@$(RUN) -- $(PYTHON) -m pdemfem.cli plot $(DEMO_OUT) --quiet
 	@echo "demo results: $(DEMO_OUT)/ (history.csv, plots/*.png, particles.xdmf and plate.xdmf for ParaView)"
 
+# One pytest worker per core (pytest-xdist); the tests that launch mpiexec all run on one of them, one at a
+# time (tests/conftest.py), so that two MPI jobs never run at once.
 test: install
-	@$(RUN) -- $(PYTHON) -m pytest -q $(PYTEST_ARGS)
+	@$(RUN) -- $(PYTHON) -m pytest -q -n auto --dist loadgroup $(PYTEST_ARGS)
 
 benchmark: install
 	@$(RUN) -- $(PYTHON) benchmarks/settle.py

@@ -78,3 +78,14 @@ def pytest_runtest_protocol(item, nextitem):
         yield
     finally:
         _current_item = None
+
+
+def pytest_collection_modifyitems(config, items):
+    # Under pytest-xdist (`make test`: one worker per core) the tests that launch mpiexec all go to one worker and
+    # run one at a time: two MPI jobs at once would oversubscribe a small machine's cores, and a waiting rank
+    # spins.  Without xdist the marker is not registered, and nothing is added.
+    if not config.pluginmanager.hasplugin("xdist"):
+        return
+    for item in items:
+        if item.get_closest_marker("mpi") is not None:
+            item.add_marker(pytest.mark.xdist_group("mpi"))
