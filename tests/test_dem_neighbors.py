@@ -12,6 +12,7 @@ import pytest
 
 from mpi_cases.dem_scenes import GLASS, dense_scene, two_spheres
 from pdemfem import Simulation
+from pdemfem.neighbors.cells import cell_grid
 
 
 def _list_pairs(neighbors):
@@ -306,3 +307,19 @@ def test_wall_records_follow_their_particles():
         assert np.array_equal(new_history[c], expected)
         restored += np.any(expected != 0.0)
     assert 0 < restored < len(spring)  # some springs moved with their particle, some were dropped
+
+
+def test_cell_grid_of_a_spread_out_scene_counts_its_cells_without_overflow_and_stops_a_diverged_one():
+    """Two particles 1e9 cells apart along each axis: 1e27 cells overflowed int64 to a negative count, the grid
+    was accepted, and the sort failed with "negative dimensions not allowed".  Past 1e10 cells (positions
+    beyond the range the scene may start in) the run diverged: a SolverError names it."""
+    from pdemfem.errors import SolverError
+
+    spread = np.array([[0.0, 0.0, 0.0], [1.0e9, 1.0e9, 1.0e9]])
+    lower, size, dimensions = cell_grid(spread, 1.0)
+    assert np.all(dimensions >= 1) and np.prod(dimensions.astype(float)) <= 64
+    assert np.all(lower + size * dimensions >= spread.max(axis=0))
+    with pytest.raises(SolverError, match="the simulation diverged"):
+        cell_grid(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0e10]]), 1.0)
+    empty_lower, _, empty_dimensions = cell_grid(np.zeros((0, 3)), 1.0)
+    assert np.all(empty_dimensions == 1)

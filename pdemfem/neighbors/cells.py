@@ -7,6 +7,9 @@ from numba import njit
 # A grid with far more cells than particles (a sparse, spread-out scene) costs
 # memory and stencil time for nothing: grow the cells instead.
 MAXIMUM_CELLS_PER_PARTICLE = 8
+# Particles spread over more cell sizes than this have left the coordinate range where float64 resolves their
+# contact overlaps (the scene's validation allows |x| <= 1e9 smallest radii): a diverged run, not a scene.
+LARGEST_EXTENT_IN_CELLS = 1.0e10
 
 
 @njit(cache=True)
@@ -27,14 +30,30 @@ def bounding_box(positions):
 def cell_grid(positions: np.ndarray, cell_size: float):
     """(lower corner, cell size, cells per axis) covering all positions."""
     count = len(positions)
+    if not count:
+        return np.zeros(3), float(cell_size), np.ones(3, dtype=np.int64)
     lower, upper = bounding_box(positions)
+    if not np.all(upper - lower <= LARGEST_EXTENT_IN_CELLS * cell_size):
+        from pdemfem.errors import SolverError
+
+        raise SolverError("particle positions",
+                          f"the simulation diverged: the particles spread from {_point(lower)} to {_point(upper)} m, "
+                          f"over more than {LARGEST_EXTENT_IN_CELLS:.0e} neighbour cells of {cell_size:.3g} m (a "
+                          f"particle was shot away)",
+                          "run the scene with `pdemfem run` or Simulation.run(), whose run monitor stops a diverging "
+                          "run with its likely cause, and check the step with `pdemfem check` (dt: auto)")
     lower = lower - 1e-9 * max(cell_size, 1.0)
     size = float(cell_size)
     while True:
         dimensions = np.maximum(np.floor((upper - lower) / size).astype(np.int64) + 1, 1)
-        if int(np.prod(dimensions)) <= max(MAXIMUM_CELLS_PER_PARTICLE * count, 64):
+        # Counted in floats: the product of three large axis counts overflows int64.
+        if float(np.prod(dimensions.astype(np.float64))) <= max(MAXIMUM_CELLS_PER_PARTICLE * count, 64):
             return lower, size, dimensions
         size *= 1.5
+
+
+def _point(values) -> str:
+    return "[" + ", ".join(f"{float(value):.3g}" for value in values) + "]"
 
 
 @njit(cache=True)
