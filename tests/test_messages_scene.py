@@ -169,6 +169,25 @@ def test_truncated_binary_stl_says_it_is_cut_short(workdir, capsys):
     assert code == 0 and "scene OK" in out, err
 
 
+def _ascii_stl(triangles: int) -> str:
+    facet = ("  facet normal 0 0 1\n    outer loop\n      vertex {x} 0 0\n      vertex {x1} 0 0\n"
+             "      vertex {x} 1 0\n    endloop\n  endfacet\n")
+    return "solid plate\n" + "".join(facet.format(x=k, x1=k + 1) for k in range(triangles)) + "endsolid plate\n"
+
+
+def test_ascii_stl_cut_between_two_facets_says_it_is_cut_short(workdir, capsys):
+    """Cut after a whole facet, meshio read the first facets as the whole surface (half a belt went missing
+    without a word); the last line of an ASCII STL must close the solid."""
+    whole = _ascii_stl(3)
+    (workdir / "cut.stl").write_text(whole[:whole.index("endfacet") + len("endfacet\n")])
+    code, _, err = check(capsys, workdir, FUNNEL.replace("FILE", "cut.stl"))
+    assert_one_error(code, err, "walls[0].file", "an ASCII STL cut short: its last line is not 'endsolid'",
+                     "copy or export it again")
+    (workdir / "whole.stl").write_text(whole)
+    code, out, err = check(capsys, workdir, FUNNEL.replace("FILE", "whole.stl"))
+    assert code == 0 and "scene OK" in out, err
+
+
 def test_a_mesh_path_that_is_a_directory(workdir, capsys):
     (workdir / "meshes").mkdir()
     code, _, err = check(capsys, workdir, FUNNEL.replace("FILE", "meshes"))

@@ -80,9 +80,19 @@ def stl_problem(path: Path):
     if head.lstrip()[:5].lower() == b"solid":
         try:
             head.decode("ascii")
-            return None  # an ASCII STL: meshio reports its own problems
         except UnicodeDecodeError:
             pass
+        else:
+            # An ASCII STL: meshio reports a line cut in the middle, but one cut between two facets reads as a
+            # smaller surface.  Its last line must close the solid.
+            with open(path, "rb") as handle:
+                handle.seek(max(size - 1024, 0))
+                lines = handle.read().rstrip().splitlines()
+            if lines and lines[-1].lstrip().lower().startswith(b"endsolid"):
+                return None
+            return ("an ASCII STL cut short: its last line is not 'endsolid' (the facets after the cut are "
+                    "missing)", "the file was truncated (an interrupted copy, download or export): copy or export "
+                    "it again")
     if size == 0:
         return "the file is empty (0 bytes)", "export the surface again (STL, gmsh .msh or .geo)"
     if count is None:
