@@ -320,7 +320,7 @@ def _command_run(arguments, comm) -> int:
     # The warnings of `pdemfem check`, before the first step (stderr, also with --quiet).
     solid_step = simulation.dt if simulation.solids and not scene.particles else None
     found = derived.warnings(scene, solid_critical_step=solid_step)
-    found += simulation.coupling_warnings
+    found += derived.mesh_wall_warnings(scene, simulation.contributor_walls) + simulation.coupling_warnings
     if comm.rank == 0:
         for warning in found:
             print(f"warning: {warning}", file=sys.stderr, flush=True)
@@ -368,11 +368,11 @@ def check_report(path: str) -> tuple:
 
     scene, base_dir = load_scene(path)
     try:
-        placed, solids = _validate_as_run(scene, base_dir)
+        placed, solids, mesh_warnings = _validate_as_run(scene, base_dir)
     except SceneError as error:
         raise _name_the_file(error, path) from None
     try:
-        return _report(path, scene, base_dir, placed, solids)
+        return _report(path, scene, base_dir, placed, solids, mesh_warnings)
     except (OverflowError, ZeroDivisionError, FloatingPointError) as error:
         # The schema's bounds cannot catch every combination of extreme values (a modulus near
         # the float64 limit, ...); report it as the scene's fault, not with a traceback.
@@ -384,7 +384,7 @@ def _validate_as_run(scene, base_dir) -> tuple:
     """What `run` reads before its first step, read the same way: the insertion, the mesh-wall
     files, the solids' meshes, and the checks that relate them (coordinates, domain.box, periodic
     lengths, particles starting behind or deep in a wall or inside a solid).
-    Returns (the number of particles placed, the solids by name or None)."""
+    Returns (the number of particles placed, the solids by name or None, the mesh walls' warnings)."""
     from pdemfem.contact.tables import build_contact_tables
     from pdemfem.particles.insert import insert_particles
     from pdemfem.particles.stream import validate_streams
@@ -411,7 +411,7 @@ def _validate_as_run(scene, base_dir) -> tuple:
     validate_geometry(scene, inserted, [(wall.name, wall.vertices) for wall in walls if hasattr(wall, "vertices")],
                       surfaces=start_surfaces(scene, walls, surfaces),
                       solids=start_solids(scene, solids) if solids else ())
-    return len(inserted.radii), solids
+    return len(inserted.radii), solids, derived.mesh_wall_warnings(scene, walls)
 
 
 def build_scene_solids(scene, base_dir) -> dict:
@@ -435,7 +435,7 @@ def _clump_sphere_count(group) -> int:
     return len(clump_spheres(group.clump)[1])
 
 
-def _report(path, scene, base_dir, placed, solids=None) -> tuple:
+def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tuple:
     from pdemfem.scene import derived
     from pdemfem.scene.loader import scene_hash
 
@@ -506,7 +506,7 @@ def _report(path, scene, base_dir, placed, solids=None) -> tuple:
             lines.append("heat: on (contact conduction" + (", solids conduct" if scene.solids else "") + ")" + (
                 f"; thermal step limit ~{thermal[0]:.3g} s ({thermal[1]}), dt is {dt / thermal[0]:.2g} of it"
                 if thermal is not None else ""))
-    found = derived.warnings(scene, solid_critical_step=solid_step)
+    found = derived.warnings(scene, solid_critical_step=solid_step) + list(mesh_warnings)
     if scene.solids:
         from pdemfem.coupling.check import coupling_report
 

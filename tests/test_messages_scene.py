@@ -188,6 +188,21 @@ def test_ascii_stl_cut_between_two_facets_says_it_is_cut_short(workdir, capsys):
     assert code == 0 and "scene OK" in out, err
 
 
+def test_a_mesh_wall_read_in_the_wrong_units_is_warned_about_by_check_and_run(workdir, capsys):
+    """A 3-facet strip 3 m long (as exported, in metres) read with scale 0.0004 spans 1.2 mm, less than the
+    2 mm bead's diameter: such a wall catches nothing, and neither check nor run said a word."""
+    (workdir / "strip.stl").write_text(_ascii_stl(3))
+    scene = FUNNEL.replace("FILE", "strip.stl").replace("material: glass}", "material: glass, scale: 0.0004}")
+    code, out, err = check(capsys, workdir, scene)
+    assert code == 0, err
+    assert "walls[0] (funnel): the mesh spans only 0.0012 m (after scale 0.0004), less than the smallest " \
+           "particle's diameter 0.002 m" in out, out
+    code, _, err = check(capsys, workdir, scene, command="run")
+    assert code == 0 and "warning: walls[0] (funnel): the mesh spans only 0.0012 m" in err, err
+    code, out, err = check(capsys, workdir, FUNNEL.replace("FILE", "strip.stl"))
+    assert code == 0 and "spans only" not in out, out
+
+
 def test_a_mesh_path_that_is_a_directory(workdir, capsys):
     (workdir / "meshes").mkdir()
     code, _, err = check(capsys, workdir, FUNNEL.replace("FILE", "meshes"))

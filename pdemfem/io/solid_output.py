@@ -72,6 +72,7 @@ class SolidOutput:
         if len(cells) and (cells.min() < 0 or cells.max() >= self.total_nodes):
             raise ValueError(f"solid output {name}: cell node numbers outside 0..{self.total_nodes - 1}")
         self._entries: list[dict] = []
+        self._grid_texts: dict[int, str] = {}  # rank 0: each listed step's grid text, made once
         # A restart resumes the file; one killed mid-write (unreadable) is moved aside and started anew, as
         # particles.h5 is: the run goes on from its checkpoint and the lost output steps are named in the log.
         if resume_step is None or not self.h5_path.exists() or not self._resume(int(resume_step)):
@@ -113,6 +114,7 @@ class SolidOutput:
             fields = {name: ("Node", a.shape[1:], a.dtype) for name, a in sorted(point_data.items())}
             fields.update({name: ("Cell", a.shape[1:], a.dtype) for name, a in sorted(cell_data.items())})
             self._entries = [e for e in self._entries if e["step"] != int(step)]
+            self._grid_texts.pop(int(step), None)
             self._entries.append({"step": int(step), "time": float(time), "fields": fields})
             self._entries.sort(key=lambda e: e["step"])
             xdmf.write_atomic(self.xdmf_path, self._document())
@@ -167,10 +169,13 @@ class SolidOutput:
                     % xdmf.data_item(h5_name, "/mesh/points", (self.total_nodes, 3), np.float64))
         grids = []
         for entry in self._entries:
-            group = "/" + step_group(entry["step"])
-            parts = [topology, geometry]
-            for name, (center, trailing, dtype) in entry["fields"].items():
-                total = self.total_nodes if center == "Node" else self.total_cells
-                parts.append(xdmf.attribute(name, center, h5_name, f"{group}/{name}", (total, *trailing), dtype))
-            grids.append(xdmf.uniform_grid(group[1:], entry["time"], parts))
+            text = self._grid_texts.get(entry["step"])
+            if text is None:  # each step's grid is made once (see ParticleOutput._grid_texts)
+                group = "/" + step_group(entry["step"])
+                parts = [topology, geometry]
+                for name, (center, trailing, dtype) in entry["fields"].items():
+                    total = self.total_nodes if center == "Node" else self.total_cells
+                    parts.append(xdmf.attribute(name, center, h5_name, f"{group}/{name}", (total, *trailing), dtype))
+                text = self._grid_texts[entry["step"]] = xdmf.uniform_grid(group[1:], entry["time"], parts)
+            grids.append(text)
         return xdmf.temporal_collection(self.name, grids)

@@ -18,6 +18,8 @@ import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
+import numpy as np
+
 from pdemfem.contact.restitution import normal_damping_coefficient
 from pdemfem.contact.registry import damping_law
 from pdemfem.errors import SceneError
@@ -890,6 +892,30 @@ def start_inside_walls(scene: Scene) -> List[str]:
                     f"particles[{index}] ({group.name}) starts partly behind or inside wall '{wall.name}' "
                     f"(normal points into the domain): move the region or the wall"
                 )
+    return found
+
+
+def mesh_wall_warnings(scene: Scene, walls) -> List[str]:
+    """Mesh walls smaller than one diameter of the smallest particle in every direction: almost surely a
+    file in other units than its `scale` assumes (a belt exported in metres read with scale 0.001 is 0.1 mm
+    long; every grain falls past it).  `walls`: the built contributor walls (MeshWall has `vertices`)."""
+    if not scene.particles:
+        return []
+    diameter = 2.0 * min(group_radius_range(group)[0] for group in scene.particles)
+    found = []
+    indices = {wall.name: index for index, wall in enumerate(scene.walls)}
+    for wall in walls:
+        vertices = getattr(wall, "vertices", None)
+        if vertices is None or not len(vertices):
+            continue
+        extent = float(np.max(np.ptp(vertices, axis=0)))
+        if extent < diameter:
+            index = indices[wall.name]
+            scale = scene.walls[index].scale
+            found.append(f"walls[{index}] ({wall.name}): the mesh spans only {extent:.3g} m (after scale {scale:g}), "
+                         f"less than the smallest particle's diameter {diameter:.3g} m: is the file in other units "
+                         f"than walls[{index}].scale assumes? (a file in millimetres needs scale: 0.001, one in "
+                         f"metres scale: 1)")
     return found
 
 
