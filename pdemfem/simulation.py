@@ -303,9 +303,9 @@ class Simulation:
                 self._guarded(monitor.check)
                 step = self.step_count
                 at_end = step == total_steps
-                if step % steps_per_output == 0 or at_end:
+                if at_end or self._scheduled(step, steps_per_output, self.output_interval, end):
                     self.io.write_output()
-                if steps_per_checkpoint and (step % steps_per_checkpoint == 0 or at_end):
+                if steps_per_checkpoint and (at_end or self._scheduled(step, steps_per_checkpoint, every, end)):
                     self.io.write_checkpoint()
                 if bar is not None:
                     bar.update(step - bar.n)
@@ -324,6 +324,13 @@ class Simulation:
             if bar is not None:
                 bar.close()
             self.io.close()
+
+    def _scheduled(self, step: int, steps_per: int, interval: float, end: float) -> bool:
+        """Whether an output (or checkpoint) interval ends at `step`, before the end's own write.  The intervals
+        are rounded to whole steps, the end is not: with end = 10 x interval the tenth interval's step fell a
+        step or a few before the end, and the run wrote the same moment twice (with checkpoint.keep 2 that
+        pruned the checkpoint of the run's middle)."""
+        return step % steps_per == 0 and (step // steps_per) * interval < end - 0.5 * self.dt
 
     def _guarded(self, check) -> None:
         """Run a monitor check (collective); on divergence write the output step, and a checkpoint when

@@ -208,3 +208,22 @@ def test_a_field_list_without_positions_writes_them_with_the_fields(tmp_path):
         last = handle[steps[-1]]
         assert sorted(last.keys()) == ["ids", "positions", "velocities"]
         np.testing.assert_allclose(np.sort(last["positions"][:, 0]), [0.0, 0.003])
+
+
+def test_the_last_interval_ending_at_the_end_is_written_once(tmp_path):
+    """end = 4 output (and checkpoint) intervals, dt not dividing them: the intervals round to 83 steps, the
+    end to 334, so the fourth interval's write fell 2 steps before the end's and the same moment was written
+    twice (history rows 0.00996 and 0.01002 s; with keep 2 the checkpoint of step 249 was pruned for it)."""
+    from pdemfem import Simulation
+    from pdemfem.plot import read_history
+
+    scene = {"time": {"end": 0.01, "dt": 3.0e-5}, "gravity": [0, 0, -9.81],
+             "materials": {"glass": {"density": 2500.0, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3}},
+             "particles": [{"name": "p", "material": "glass", "radius": 0.001,
+                            "insert": {"kind": "list", "positions": [[0, 0, 0.01]]}}],
+             "output": {"every": 0.0025, "particles": []}, "checkpoint": {"every": 0.0025, "keep": 2}}
+    simulation = Simulation.from_dict(scene, base_dir=tmp_path, output_dir=tmp_path / "out")
+    simulation.run(progress=False)
+    assert list(read_history(tmp_path / "out" / "history.csv")["step"]) == [0, 83, 166, 249, 334]
+    kept = sorted(int(path.stem.split("_")[1]) for path in (tmp_path / "out" / "checkpoints").glob("checkpoint_*.h5"))
+    assert kept == [249, 334], kept
