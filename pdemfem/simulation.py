@@ -546,7 +546,7 @@ class Simulation:
     def temperature_statistics(self) -> dict:
         """Collective: temperature_<body>_min/_mean/_max [K] of the particles (mean weighted by m c, so it is
         the temperature their heat content would have if spread evenly) and of each conducting solid's
-        nodes (plain nodal mean)."""
+        nodes (plain nodal mean); nan while there is no particle."""
         from mpi4py import MPI
 
         system = self.particle_system
@@ -565,9 +565,11 @@ class Simulation:
         for body, (sums, extremes) in bodies.items():
             self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
             self.comm.Allreduce(MPI.IN_PLACE, extremes, op=MPI.MAX)
-            row[f"temperature_{body}_min"] = -float(extremes[0])
+            # No particle yet (a stream's first rows): no temperature, nan in all three (not +-inf).
+            empty = not np.isfinite(extremes[1])
+            row[f"temperature_{body}_min"] = float("nan") if empty else -float(extremes[0])
             row[f"temperature_{body}_mean"] = float(sums[0] / sums[1]) if sums[1] > 0 else float("nan")
-            row[f"temperature_{body}_max"] = float(extremes[1])
+            row[f"temperature_{body}_max"] = float("nan") if empty else float(extremes[1])
         return row
 
     def dashpot_dissipation(self) -> float:

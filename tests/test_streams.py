@@ -313,3 +313,17 @@ def test_insertion_keeps_the_forces_of_particles_that_change_rank(tmp_path):
     words = completed.stdout.split()
     migrated, compared = int(words[words.index("migrated") + 1]), int(words[words.index("compared") + 1])
     assert migrated > 0 and compared > 0, completed.stdout
+
+
+def test_temperature_statistics_of_no_particles_yet_are_nan(tmp_path):
+    """A heated stream's first rows, before any grain came in, held min = inf and max = -inf."""
+    scene = falling_stream(tmp_path)
+    scene["particles"][0]["initial_temperature"] = 400.0
+    scene["materials"]["glass"].update(conductivity=1.0, heat_capacity=800.0)
+    sim = Simulation.from_dict(scene, output_dir=tmp_path)
+    empty = sim.temperature_statistics()
+    assert sim.particle_count() == 0
+    assert all(math.isnan(empty[f"temperature_particles_{kind}"]) for kind in ("min", "mean", "max")), empty
+    while sim.particle_count() == 0:
+        sim.step(1)
+    assert sim.temperature_statistics()["temperature_particles_max"] == 400.0
