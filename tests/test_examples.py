@@ -1,7 +1,7 @@
 """Every examples/*.yaml runs a short window and obeys its physics (as a user would run it).
 
 Each scene is run as shipped except `time.end` (the first WINDOW_FRACTION of the run, at most
-WINDOW_STEPS steps: the grains land, collide or tumble in it; a few seconds each) and its output (a temporary folder, one history row every ROW_STEPS steps, no field
+WINDOW_STEPS steps or the fall of its highest grain: the grains land, collide or tumble in it) and its output (a temporary folder, one history row every ROW_STEPS steps, no field
 series).  The history must show:
 
 * no particle lost and none created (`particles` constant, `lost_particles` 0), unless the scene has
@@ -14,6 +14,7 @@ series).  The history must show:
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +29,9 @@ from pdemfem.scene.loader import load_scene
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 WINDOW_FRACTION = 0.5
-# The long scenes' windows (a conveyor, a discharging hopper) stop here: by then their first grains have
-# landed and the energy has changed form many times over; the rest of their half-time adds minutes, no check.
+# The long scenes' windows (a conveyor, a discharging hopper) stop after this many steps, or once their
+# highest grain can have fallen to the floor (derived.fall_height) if that takes longer: by then the grains
+# have landed and the energy has changed form many times over; the rest of their half-time adds minutes.
 WINDOW_STEPS = 10000
 ROW_STEPS = 50
 # Velocity Verlet resolving a contact in >= 30 steps (what dt auto and `check` enforce for every
@@ -51,7 +53,9 @@ def short_scene(path: Path, folder: Path) -> dict:
     scene, _ = load_scene(path)
     dt = float(derived.time_step(scene, base_dir=path.parent)) if scene.particles else None
     if dt is not None:
-        data["time"]["end"] = min(WINDOW_FRACTION * scene.time.end, WINDOW_STEPS * dt)
+        gravity = float(np.linalg.norm(scene.gravity))
+        fall = math.sqrt(2.0 * derived.fall_height(scene) / gravity) if gravity > 0.0 else 0.0
+        data["time"]["end"] = min(WINDOW_FRACTION * scene.time.end, max(WINDOW_STEPS * dt, fall))
         data["output"] = {"dir": str(folder), "every": ROW_STEPS * dt, "particles": [], "solids": []}
     return data
 
