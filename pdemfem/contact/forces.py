@@ -14,7 +14,7 @@ import math
 from numba import njit
 
 from pdemfem.contact.conduction import contact_conductance
-from pdemfem.contact.layout import COHESIVE, HEAT, ROLLING_ANY
+from pdemfem.contact.layout import COHESIVE, HEAT, ROLLING_ANY, TANGENTIAL
 from pdemfem.contact.registry import history_layout
 from pdemfem.contact.response import (add_particle_loads, clear_history, cohesive_contact_holds, contact_response,
                                       released_energy, rigid_wall_contact)
@@ -136,6 +136,28 @@ def pair_forces(row_particles, pair_starts, pair_ends, neighbor_partners, pair_h
             vx = velocities[i, 0] - velocities[j, 0] - (sy * nz - sz * ny)
             vy = velocities[i, 1] - velocities[j, 1] - (sz * nx - sx * nz)
             vz = velocities[i, 2] - velocities[j, 2] - (sx * ny - sy * nx)
+            previous_vx = vx
+            previous_vy = vy
+            previous_vz = vz
+            if composition & TANGENTIAL:
+                # The same velocity at the previous evaluation's normal and levers (the centres a step
+                # earlier, as the drift moved them): what the tangential force applied then worked on.
+                ex = dx - dt * (velocities[i, 0] - velocities[j, 0])
+                ey = dy - dt * (velocities[i, 1] - velocities[j, 1])
+                ez = dz - dt * (velocities[i, 2] - velocities[j, 2])
+                earlier = math.sqrt(ex * ex + ey * ey + ez * ez)
+                inverse_earlier = 1.0 / earlier
+                ex *= inverse_earlier
+                ey *= inverse_earlier
+                ez *= inverse_earlier
+                earlier_lever_i = radius_i - 0.5 * (radius_sum - earlier)
+                earlier_lever_j = radius_j - 0.5 * (radius_sum - earlier)
+                qx = earlier_lever_i * wxi + earlier_lever_j * wxj
+                qy = earlier_lever_i * wyi + earlier_lever_j * wyj
+                qz = earlier_lever_i * wzi + earlier_lever_j * wzj
+                previous_vx = velocities[i, 0] - velocities[j, 0] - (qy * ez - qz * ey)
+                previous_vy = velocities[i, 1] - velocities[j, 1] - (qz * ex - qx * ez)
+                previous_vz = velocities[i, 2] - velocities[j, 2] - (qx * ey - qy * ex)
             effective_mass = mass[i] * mass[j] / (mass[i] + mass[j])
             effective_radius = radius_i * radius_j / radius_sum
             effective_inertia = 0.0  # only rolling models use it: a division saved per contact without them
@@ -143,8 +165,8 @@ def pair_forces(row_particles, pair_starts, pair_ends, neighbor_partners, pair_h
                 effective_inertia = 1.0 / (inverse_inertia[i] + inverse_inertia[j])
             fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = contact_response(
                 composition, coefficients, material_i, material_j, nx, ny, nz, overlap, vx, vy, vz,
-                wxi - wxj, wyi - wyj, wzi - wzj, effective_mass, effective_radius, effective_inertia,
-                pair_history, row, dt)
+                previous_vx, previous_vy, previous_vz, wxi - wxj, wyi - wyj, wzi - wzj, effective_mass,
+                effective_radius, effective_inertia, pair_history, row, dt)
             if booked:
                 elastic_total += elastic
                 dissipated_total += dissipated

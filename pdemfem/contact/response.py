@@ -67,9 +67,12 @@ def clear_history(composition, history, row):
 
 
 @njit(inline="always", cache=True)
-def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, vy, vz, wx, wy, wz,
-                     effective_mass, effective_radius, effective_inertia, history, row, dt):
+def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, vy, vz, previous_vx, previous_vy,
+                     previous_vz, wx, wy, wz, effective_mass, effective_radius, effective_inertia, history, row, dt):
     """Force and rolling moment on i for one contact; updates history[row].
+
+    previous_v is the contact point's relative velocity of this step as the previous evaluation's geometry
+    (normal, levers) sees it: what the tangential force applied then worked on (used with friction only).
 
     Returns (fx, fy, fz, mx, my, mz, elastic energy, dissipated energy this step, c_n, c_t): the
     dashpots' force on i is -(c_n n n^T + c_t (I - n n^T)) v; c_n is 0 when the dashpot was
@@ -116,7 +119,7 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
                 load += normal_friction_offset(model, composition, coefficients, a, b, effective_radius)
             tangential_damping = dashpot(gamma, effective_mass, tangential_stiffness)
             tx, ty, tz, tangential_damping, spring_energy, tangential_dissipated = tangential_mindlin.force(
-                nx, ny, nz, vx, vy, vz, normal_speed, tangential_stiffness,
+                nx, ny, nz, vx, vy, vz, normal_speed, previous_vx, previous_vy, previous_vz, tangential_stiffness,
                 tangential_damping, friction * max(load, 0.0), history, row, tangential_column, dt)
             fx += tx
             fy += ty
@@ -162,9 +165,16 @@ def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz
     effective_inertia = 0.0  # only rolling models use it
     if composition & ROLLING_ANY:
         effective_inertia = 1.0 / inverse_inertia
+    # The same velocity with the previous evaluation's lever, the distance a step earlier (exact for a plane
+    # or a facet; on a curved surface the normal's turn over the step is left out).
+    receded = dt * (relative_x * nx + relative_y * ny + relative_z * nz)
+    previous_x = relative_x + receded * (wy * nz - wz * ny)
+    previous_y = relative_y + receded * (wz * nx - wx * nz)
+    previous_z = relative_z + receded * (wx * ny - wy * nx)
     fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = contact_response(
         composition, coefficients, material, wall_row, nx, ny, nz, radius - distance, relative_x, relative_y,
-        relative_z, wx, wy, wz, mass, radius, effective_inertia, history, slot, dt)
+        relative_z, previous_x, previous_y, previous_z, wx, wy, wz, mass, radius, effective_inertia, history, slot,
+        dt)
     tx = -lever * (ny * fz - nz * fy) + mx
     ty = -lever * (nz * fx - nx * fz) + my
     tz = -lever * (nx * fy - ny * fx) + mz

@@ -25,7 +25,7 @@ a sphere resting on a face near a convex edge does not also feel the edge of the
 neighbouring face.  An edge or vertex that only one patch owns (the rim of a finite
 plate) is a genuine contact.
 
-History.  Each particle has K slots per mesh (patch id, xi[3], last overlap) in
+History.  Each particle has K slots per mesh (patch id, the contact's history row, last overlap) in
 ParticleState.fields, so the tangential spring follows the patch, not the
 triangle: rolling across triangles of one patch carries it on unchanged.
 

@@ -63,8 +63,8 @@ def pile_scene(out_dir, steps: int, output_steps: int, checkpoint_steps=None, co
 
 def cohesive(scene: dict) -> dict:
     """The pile with JKR adhesion (F_c = 3/2 pi W R* about a grain's weight) and elastic-plastic rolling
-    resistance: contact history of 8 columns (tangential and rolling springs, their energy, touching flag) on pairs,
-    plane walls and the FE surface."""
+    resistance: contact history of 11 columns (tangential spring and its last applied force, rolling spring, their
+    energy, touching flag) on pairs, plane walls and the FE surface."""
     scene["interactions"]["default"].update(model="jkr", work_of_adhesion=1.0, rolling_friction=0.1,
                                             rolling_model="elastic_plastic")
     return scene
