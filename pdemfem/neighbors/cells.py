@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from pdemfem.errors import SolverError
+
 # A grid with far more cells than particles (a sparse, spread-out scene) costs
 # memory and stencil time for nothing: grow the cells instead.
 MAXIMUM_CELLS_PER_PARTICLE = 8
@@ -34,8 +36,6 @@ def cell_grid(positions: np.ndarray, cell_size: float):
         return np.zeros(3), float(cell_size), np.ones(3, dtype=np.int64)
     lower, upper = bounding_box(positions)
     if not np.all(upper - lower <= LARGEST_EXTENT_IN_CELLS * cell_size):
-        from pdemfem.errors import SolverError
-
         raise SolverError("particle positions",
                           f"the simulation diverged: the particles spread from {_point(lower)} to {_point(upper)} m, "
                           f"over more than {LARGEST_EXTENT_IN_CELLS:.0e} neighbour cells of {cell_size:.3g} m (a "
