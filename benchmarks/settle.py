@@ -121,14 +121,18 @@ def current_rss() -> int:
 
 
 def array_bytes(*objects) -> int:
-    """Bytes of every numpy array held directly by `objects` (the solver's state), each buffer once: a
-    view (the neighbour list's partners and history are views of reused buffers) counts its base."""
+    """Bytes of every numpy array held directly by `objects` (the solver's state), or by a buffer they keep
+    between rebuilds (pdemfem.kept_rows.KeptRows: the contact records, the sorted positions), each buffer
+    once: a view (the neighbour list's partners and history are views of reused buffers) counts its base."""
     import numpy as np
+    from pdemfem.kept_rows import KeptRows
 
     total = 0
     counted = set()
     for item in objects:
         for value in vars(item).values():
+            if isinstance(value, KeptRows):
+                value = value.rows
             if isinstance(value, np.ndarray):
                 while isinstance(value.base, np.ndarray):
                     value = value.base

@@ -116,16 +116,18 @@ def test_kick_drift_reports_a_non_finite_displacement(bad):
 
 
 def _hash_restore(row_particles, offsets, partners, history, ids, owned_count, records, signs):
-    """The reference: for every listed pair, the first record with its (owner id, partner id)."""
+    """The reference: for every listed pair, the first record with (owned i, j), else the first with (owned j, i)
+    (springs flipped)."""
     first_record = {}
     for k in range(len(records)):
         first_record.setdefault((int(records[k, 0]), int(records[k, 1])), k)
     for r, i in enumerate(row_particles):
         for row in range(offsets[r], offsets[r + 1]):
             j = partners[row]
-            flipped = i >= owned_count
-            key = (int(ids[j]), int(ids[i])) if flipped else (int(ids[i]), int(ids[j]))
-            k = first_record.get(key)
+            k = first_record.get((int(ids[i]), int(ids[j]))) if i < owned_count else None
+            flipped = k is None
+            if flipped and j < owned_count:
+                k = first_record.get((int(ids[j]), int(ids[i])))
             if k is not None:
                 values = records[k, 2:]
                 history[row] = signs * values if flipped else values
@@ -180,6 +182,40 @@ def test_restore_records_matches_a_lookup_by_pair(id_stride):
     restore_records(row_particles, offsets, partners, restored, ids, owned_count, records, signs)
     assert np.count_nonzero(np.any(expected != 0.0, axis=1)) > 20
     assert np.array_equal(restored, expected)
+
+
+def test_one_record_per_pair_restores_what_one_per_particle_restores():
+    """Collected one per pair (one rank, nothing migrates), the records restore every pair's history, seen from
+    either particle in the new list, exactly as the records of both particles do; and there are as many as
+    pairs with history, against one per owned particle of each."""
+    rng = np.random.default_rng(5)
+    count, owned_count, width = 300, 240, 4
+    signs = np.array([-1.0, -1.0, -1.0, 1.0])
+    ids = (rng.permutation(count) + 3).astype(np.int64)
+    row_particles, offsets, partners = _random_list(rng, count, owned_count)
+    history = rng.normal(size=(len(partners), width))
+    history[rng.random(len(partners)) < 0.4] = 0.0
+    both = collect_records(row_particles, offsets, partners, history, ids, owned_count, signs)
+    single = collect_records(row_particles, offsets, partners, history, ids, owned_count, signs, True)
+    in_use = np.any(history != 0.0, axis=1)
+    assert len(single) == np.count_nonzero(in_use)
+    first = np.repeat(row_particles, np.diff(offsets))
+    both_owned = (first < owned_count) & (partners < owned_count)
+    assert len(both) == len(single) + np.count_nonzero(in_use & both_owned)
+    # The new list: every pair seen from the other particle where both are owned, rows in another order.
+    rows_of = {}
+    for a, b in zip(first, partners):
+        a, b = (int(b), int(a)) if a < owned_count and b < owned_count else (int(a), int(b))
+        rows_of.setdefault(a, []).append(b)
+    new_rows = rng.permutation(count).astype(np.int64)
+    new_partners = np.array([b for a in new_rows for b in rows_of.get(int(a), [])], dtype=np.int32)
+    new_offsets = np.concatenate([[0], np.cumsum([len(rows_of.get(int(a), [])) for a in new_rows])]).astype(np.int64)
+    from_both = np.zeros((len(new_partners), width))
+    from_single = np.zeros((len(new_partners), width))
+    restore_records(new_rows, new_offsets, new_partners, from_both, ids, owned_count, both, signs)
+    restore_records(new_rows, new_offsets, new_partners, from_single, ids, owned_count, single, signs)
+    assert np.count_nonzero(np.any(from_single != 0.0, axis=1)) == np.count_nonzero(in_use)
+    assert np.array_equal(from_single, from_both)
 
 
 def test_contact_kernels_report_the_deepest_overlap_over_the_smaller_radius():

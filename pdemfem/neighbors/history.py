@@ -6,7 +6,12 @@ are multiplied by `signs` (-1 for a spring, which flips with the pair's order) w
 seen from the other particle.  Records are taken from the Verlet
 list before a rebuild, travel with their owner when it migrates, and are looked
 up again by (owner id, partner id) after the new list is built, among the few
-records of the pair's owner.  Both directions are numba loops: O(pairs) each.
+records of either particle of the pair.  Both directions are numba loops: O(pairs) each.
+
+Where particles migrate (several ranks, periodic images) a pair of two owned particles has a record
+from each, because the two may be owned by different ranks after the rebuild.  Where nothing
+migrates (one rank, no periodic boundary) one record per pair is enough (`one_per_pair`): the
+records buffer, the largest array a settling bed holds (72 B a record), halves.
 
 A particle's contact with plane wall w travels the same way, as the record (particle id,
 -1 - w, history): the partner key is negative, so no pair ever matches it, and only the
@@ -32,9 +37,11 @@ def _in_use(history, row):
 
 
 @njit(cache=True)
-def collect_records_into(row_particles, offsets, partners, history, ids, owned_count, signs, records):
-    """Write the records of every contact with history in use, one per owned particle of the pair, into the
-    leading rows of `records` (as many as fit); returns how many there are (may exceed its rows)."""
+def collect_records_into(row_particles, offsets, partners, history, ids, owned_count, signs, records,
+                         one_per_pair=False):
+    """Write the records of every contact with history in use, one per owned particle of the pair (one per
+    pair with `one_per_pair`), into the leading rows of `records` (as many as fit); returns how many there
+    are (may exceed its rows)."""
     width = history.shape[1]
     capacity = records.shape[0]
     written = 0
@@ -52,7 +59,7 @@ def collect_records_into(row_particles, offsets, partners, history, ids, owned_c
                     for column in range(width):
                         records[written, RECORD_KEYS + column] = history[row, column]
                 written += 1
-            if j < owned_count:
+            if j < owned_count and not (one_per_pair and i_owned):
                 if written < capacity:
                     # The springs are the first particle's relative to the second: they flip.
                     records[written, 0] = ids[j]
@@ -64,13 +71,14 @@ def collect_records_into(row_particles, offsets, partners, history, ids, owned_c
 
 
 @njit(cache=True)
-def collect_records(row_particles, offsets, partners, history, ids, owned_count, signs):
-    """Records of every contact with history in use, one per owned particle of the pair (a new array)."""
+def collect_records(row_particles, offsets, partners, history, ids, owned_count, signs, one_per_pair=False):
+    """Records of every contact with history in use, one per owned particle of the pair (one per pair with
+    `one_per_pair`), as a new array."""
     width = history.shape[1]
     count = collect_records_into(row_particles, offsets, partners, history, ids, owned_count, signs,
-                                 np.empty((0, RECORD_KEYS + width)))
+                                 np.empty((0, RECORD_KEYS + width)), one_per_pair)
     records = np.empty((count, RECORD_KEYS + width))
-    collect_records_into(row_particles, offsets, partners, history, ids, owned_count, signs, records)
+    collect_records_into(row_particles, offsets, partners, history, ids, owned_count, signs, records, one_per_pair)
     return records
 
 
@@ -110,10 +118,12 @@ def _owned_rows_of(records, ids, owned_count):
 def restore_records(row_particles, offsets, partners, history, ids, owned_count, records, signs):
     """Fill the new list's history from the records (pairs without a record start at zero).
 
-    A pair's record is the one of its owner: i, or j when i is a ghost (then the springs flip).  The
-    records are grouped by their owner's row (a counting sort, stable: of two records of one pair the
-    first wins), so each listed pair scans the few records of one particle, in about the order of the
-    list (a hash table over all records cost a cache miss or two per listed pair)."""
+    A pair's record is looked up among i's records (partner j), then, when j is owned, among j's (partner
+    i; the springs flip): records collected one per pair hold either.  A ghost i has no records here, so
+    only j's are looked up.  The records are grouped by their owner's row (a counting sort, stable: of two
+    records of one particle for one partner the first wins), so each listed pair scans the few records of
+    one or two particles, in about the order of the list (a hash table over all records cost a cache miss
+    or two per listed pair)."""
     width = history.shape[1]
     record_count = records.shape[0]
     if record_count == 0:
@@ -137,22 +147,28 @@ def restore_records(row_particles, offsets, partners, history, ids, owned_count,
             next_slot[owner_row] = slot + 1
     for r in range(row_particles.shape[0]):
         i = row_particles[r]
-        flipped = i >= owned_count
+        i_owned = i < owned_count
         for row in range(offsets[r], offsets[r + 1]):
             j = partners[row]
-            if flipped:
-                owner_row, partner = j, ids[i]
-                if j >= owned_count:
-                    continue  # two ghosts: never listed, and no record of theirs is kept here
-            else:
-                owner_row, partner = i, ids[j]
-            for slot in range(starts[owner_row], starts[owner_row + 1]):
-                if partner_of_slot[slot] == partner:
-                    k = record_of_slot[slot]
-                    for column in range(width):
-                        value = records[k, RECORD_KEYS + column]
-                        history[row, column] = signs[column] * value if flipped else value
-                    break
+            k = -1
+            if i_owned:
+                k = _record_of(starts, partner_of_slot, record_of_slot, i, ids[j])
+            flipped = k < 0
+            if flipped and j < owned_count:
+                k = _record_of(starts, partner_of_slot, record_of_slot, j, ids[i])
+            if k >= 0:
+                for column in range(width):
+                    value = records[k, RECORD_KEYS + column]
+                    history[row, column] = signs[column] * value if flipped else value
+
+
+@njit(inline="always", cache=True)
+def _record_of(starts, partner_of_slot, record_of_slot, owner_row, partner):
+    """The first record of the particle at owned row `owner_row` for `partner` (an id), -1: none."""
+    for slot in range(starts[owner_row], starts[owner_row + 1]):
+        if partner_of_slot[slot] == partner:
+            return record_of_slot[slot]
+    return -1
 
 
 @njit(cache=True)

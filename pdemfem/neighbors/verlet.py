@@ -271,10 +271,12 @@ class VerletList:
         self.boundary = (order[rows], interior_ends[rows], offsets[1:][rows])
         self.interior_pair_count = self.pair_count - int(np.sum(self.boundary[2] - self.boundary[1]))
 
-    def contact_records(self, ids: np.ndarray, owned_count: int, wall_candidates=None) -> np.ndarray:
-        """History of the springs in use, one row per owned particle in contact (see module doc), followed by
-        the plane-wall contacts' records when `wall_candidates` = (particles, walls, history) is given
-        (pdemfem.walls.plane.PlaneWalls.candidates); after load_state_dict, the loaded records (walls'
+    def contact_records(self, ids: np.ndarray, owned_count: int, wall_candidates=None,
+                        one_per_pair: bool = False) -> np.ndarray:
+        """History of the springs in use, one row per owned particle in contact (one per pair with
+        `one_per_pair`, when no particle migrates before the records are restored: pdemfem.neighbors.history),
+        followed by the plane-wall contacts' records when `wall_candidates` = (particles, walls, history) is
+        given (pdemfem.walls.plane.PlaneWalls.candidates); after load_state_dict, the loaded records (walls'
         included) until the next build."""
         if self._loaded_records is not None:
             return self._loaded_records
@@ -282,15 +284,15 @@ class VerletList:
         # the next collection), for the reason the partners' buffer is kept: 1.3 ms against 1.7-2.0 ms (up to
         # 6 ms when the allocator maps the fresh array) for the settle benchmark's 110,000 records.
         collected_into = self._records.rows
-        count = self._collect_records(ids, owned_count, wall_candidates, collected_into)
+        count = self._collect_records(ids, owned_count, wall_candidates, collected_into, one_per_pair)
         records = self._records.at_least(count, collected_into.shape[1])
         if records is not collected_into:  # too small (or far too large): collected again into the new one
-            self._collect_records(ids, owned_count, wall_candidates, records)
+            self._collect_records(ids, owned_count, wall_candidates, records, one_per_pair)
         return records[:count]
 
-    def _collect_records(self, ids, owned_count, wall_candidates, records) -> int:
+    def _collect_records(self, ids, owned_count, wall_candidates, records, one_per_pair) -> int:
         count = collect_records_into(self.row_particles, self.offsets, self.partners, self.history, ids, owned_count,
-                                     self.history_signs, records)
+                                     self.history_signs, records, one_per_pair)
         if wall_candidates is not None:
             count = collect_wall_records_into(*wall_candidates, ids, records, count)
         return count
@@ -298,8 +300,14 @@ class VerletList:
     # ------------------------------------------------------------ checkpoints
     def state_dict(self, ids: np.ndarray, owned_count: int, wall_candidates=None) -> dict:
         """The contact records (the plane walls' too, with `wall_candidates`) as CONTACT_ROWS keyed by the
-        (owner id, partner id) pairs."""
-        records = self.contact_records(ids, owned_count, wall_candidates)
+        (owner id, partner id) pairs: one per owned particle of a pair, as a restart on other ranks needs,
+        in an array of their own (not the rebuilds' buffer, sized for one per pair on one rank)."""
+        records = self._loaded_records
+        if records is None:
+            width = RECORD_KEYS + len(self.history_signs)
+            records = np.empty((self._collect_records(ids, owned_count, wall_candidates, np.empty((0, width)),
+                                                      False), width))
+            self._collect_records(ids, owned_count, wall_candidates, records, False)
         return {"pairs": kinds.Entry(kinds.CONTACT_KEYS, np.ascontiguousarray(records[:, :2]).astype(np.int64)),
                 "history": kinds.Entry(kinds.CONTACT_ROWS, np.ascontiguousarray(records[:, 2:]))}
 

@@ -383,8 +383,11 @@ class ParticleSystem(kinds.StateComponent):
         self._pending_rebalance_log = None
 
     def _contact_records(self) -> np.ndarray:
-        """The contact records of the particle pairs and of the plane walls (pdemfem.neighbors.history)."""
-        return self.neighbors.contact_records(self.state.ids, self.state.owned_count, self.walls.candidates)
+        """The contact records of the particle pairs and of the plane walls (pdemfem.neighbors.history): one per
+        pair where no particle migrates or has a periodic image (each pair's two particles stay owned here)."""
+        one_per_pair = self.comm.size == 1 and not np.any(self.periodic_lengths > 0)
+        return self.neighbors.contact_records(self.state.ids, self.state.owned_count, self.walls.candidates,
+                                              one_per_pair)
 
     def _particle_costs(self) -> np.ndarray:
         """Cost per owned particle, in units of a listed pair that is apart (a distance test, ~5 ns):

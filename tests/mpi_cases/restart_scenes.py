@@ -109,8 +109,9 @@ def gather_state(simulation) -> dict | None:
     for name, values in state.fields.items():
         local["field:" + name] = values[:owned]
     gathered = comm.gather(local, root=0)
-    # The contact history of the particle pairs and the plane walls, keyed by (owner id, partner key).
-    records = comm.gather(system._contact_records().copy(), root=0)
+    # The contact history of the particle pairs and the plane walls, keyed by (owner id, partner key): one
+    # record per owned particle of a pair on any rank count, as checkpoints hold them.
+    records = comm.gather(system.neighbors.contact_records(state.ids, owned, system.walls.candidates).copy(), root=0)
     solids = {}
     for name, solid in simulation.solids.items():
         rows = comm.gather((np.asarray(solid.original_node_ids), solid.displacements, solid.velocities), root=0)
