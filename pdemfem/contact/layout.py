@@ -43,7 +43,8 @@ HEAT = 1 << 14           # heat is on: contacts conduct (pdemfem.contact.conduct
 #      pdemfem.contact.registry.history_layout)
 TANGENTIAL_COLUMNS = 6   # xi: the tangential spring's displacement, then the tangential force applied at the last
                          # evaluation (both flip sign with the pair's order)
-ROLLING_COLUMNS = 3      # the rolling spring's moment on the first particle (flips sign)
+ROLLING_APPLIED_COLUMNS = 3  # the rolling moment applied at the last evaluation (flips sign); every rolling model
+ROLLING_SPRING_COLUMNS = 3   # then a rolling spring's moment on the first particle (flips sign), for models with one
 SPRING_ENERGY_COLUMNS = 1  # the springs' energy as booked at the last evaluation (symmetric)
 COHESIVE_COLUMNS = 1     # 1.0 while the contact is formed (symmetric)
 

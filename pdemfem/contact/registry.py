@@ -30,7 +30,8 @@ from numba import njit
 from pdemfem.contact import (normal_hertz, normal_jkr, normal_linear, rolling_constant_torque,
                              rolling_elastic_plastic)
 from pdemfem.contact.layout import (COHESIVE, COHESIVE_COLUMNS, MAXIMUM_NORMAL_MODELS, MAXIMUM_ROLLING_MODELS,
-                                    NORMAL_BITS, ROLLING_BITS, ROLLING_COLUMNS, SPRING_ENERGY_COLUMNS, TANGENTIAL,
+                                    NORMAL_BITS, ROLLING_APPLIED_COLUMNS, ROLLING_BITS, ROLLING_SPRING_COLUMNS,
+                                    SPRING_ENERGY_COLUMNS, TANGENTIAL,
                                     TANGENTIAL_COLUMNS)
 
 NORMAL_MODELS = (
@@ -63,8 +64,22 @@ def rolling_bit(model) -> int:
     return 1 << (ROLLING_BITS + model.CODE - 1)
 
 
-# Rolling models that keep a spring in the contact history.
+# Rolling models that keep a history (the moment applied at the last evaluation, for the books), and those
+# that keep a spring after it.
 ROLLING_HISTORY_BITS = sum(rolling_bit(model) for model in ROLLING_MODELS if model.HISTORY_COLUMNS)
+ROLLING_SPRING_BITS = sum(rolling_bit(model) for model in ROLLING_MODELS
+                          if model.HISTORY_COLUMNS > ROLLING_APPLIED_COLUMNS)
+assert all(model.HISTORY_COLUMNS in (ROLLING_APPLIED_COLUMNS, ROLLING_APPLIED_COLUMNS + ROLLING_SPRING_COLUMNS)
+           for model in ROLLING_MODELS)
+
+
+@njit(inline="always", cache=True)
+def _rolling_columns(composition):
+    if composition & ROLLING_SPRING_BITS:
+        return ROLLING_APPLIED_COLUMNS + ROLLING_SPRING_COLUMNS
+    if composition & ROLLING_HISTORY_BITS:
+        return ROLLING_APPLIED_COLUMNS
+    return 0
 
 
 @njit(inline="always", cache=True)
@@ -80,7 +95,7 @@ def history_layout(composition):
         column += TANGENTIAL_COLUMNS
     if composition & ROLLING_HISTORY_BITS:
         rolling = column
-        column += ROLLING_COLUMNS
+        column += _rolling_columns(composition)
     if tangential >= 0 or rolling >= 0:
         column += SPRING_ENERGY_COLUMNS
     if composition & COHESIVE:
@@ -97,8 +112,7 @@ def spring_energy_column(composition):
     column = 0
     if composition & TANGENTIAL:
         column += TANGENTIAL_COLUMNS
-    if composition & ROLLING_HISTORY_BITS:
-        column += ROLLING_COLUMNS
+    column += _rolling_columns(composition)
     return column - 1 + SPRING_ENERGY_COLUMNS if column > 0 else -1
 
 

@@ -10,7 +10,9 @@ plus a viscous moment M_d = -eta_r 2 sqrt(I* k_r) w_r while the spring is below 
 Unlike the constant torque, a body on a slope flatter than mu_r comes to a true rest.
 The spring moment (on the first body) is the contact's rolling history: it turns with the
 tangent plane and is kept while the contact lasts.  Its energy |M_k|^2 / (2 k_r) is booked as
-elastic; the rest of the moments' work as dissipated.
+elastic; the rest of the moments' work as dissipated.  The history also keeps the moment applied
+at the last evaluation (spring, dashpot and cap): velocity Verlet turns the bodies over a step
+under half of it and half of the new one, and the work is booked so.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from pdemfem.contact.layout import ROLLING_FRICTION, ROLLING_PARAMETERS
 
 NAME = "elastic_plastic"
 CODE = 2
-HISTORY_COLUMNS = 3
+HISTORY_COLUMNS = 6   # the moment applied at the last evaluation (3), then the spring moment (3)
 
 STIFFNESS_FACTOR = 2.25              # k_r = 2.25 mu_r^2 R*^2 S_n (Iwashita & Oda; Ai et al. eq. 26)
 DAMPING_RATIO = ROLLING_PARAMETERS   # eta_r
@@ -38,9 +40,9 @@ def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stif
     mu_r = coefficients[a, b, ROLLING_FRICTION]
     lever_squared = (mu_r * effective_radius) ** 2
     stiffness = STIFFNESS_FACTOR * lever_squared * normal_stiffness
-    mx = history[row, column]
-    my = history[row, column + 1]
-    mz = history[row, column + 2]
+    mx = history[row, column + 3]
+    my = history[row, column + 4]
+    mz = history[row, column + 5]
     if mx != 0.0 or my != 0.0 or mz != 0.0:
         mx, my, mz = turn_into_tangent_plane(mx, my, mz, nx, ny, nz)
     along_normal = wx * nx + wy * ny + wz * nz
@@ -60,13 +62,22 @@ def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stif
         mz *= scale
     elif stiffness > 0.0:
         damping = coefficients[a, b, DAMPING_RATIO] * 2.0 * math.sqrt(effective_inertia * stiffness)
-    history[row, column] = mx
-    history[row, column + 1] = my
-    history[row, column + 2] = mz
     energy = 0.5 * (mx * mx + my * my + mz * mz) / stiffness if stiffness > 0.0 else 0.0
     total_x = mx - damping * rx
     total_y = my - damping * ry
     total_z = mz - damping * rz
-    # Work taken from the relative rolling minus what the spring holds now (the caller books the before).
-    return total_x, total_y, total_z, energy, -(total_x * rx + total_y * ry + total_z * rz) * dt - energy
+    # Work taken from the relative rolling minus what the spring holds now (the caller books the before): the
+    # trapezoid of the moment applied at the previous evaluation and the new one, as velocity Verlet turns the
+    # bodies under half of each.  A moment's power is M . w whatever the contact's geometry, so the previous
+    # moment needs no older normal.  The new moment alone booked O(dt) too much: a sphere's 45 degree impact on
+    # a plane (e = 0.99, friction 1, mu_r 0.5) gained 0.55 % of its energy in the books, halving with dt.
+    previous_work = history[row, column] * wx + history[row, column + 1] * wy + history[row, column + 2] * wz
+    history[row, column] = total_x
+    history[row, column + 1] = total_y
+    history[row, column + 2] = total_z
+    history[row, column + 3] = mx
+    history[row, column + 4] = my
+    history[row, column + 5] = mz
+    work = -0.5 * dt * (previous_work + total_x * rx + total_y * ry + total_z * rz)
+    return total_x, total_y, total_z, energy, work - energy
 
