@@ -9,8 +9,8 @@ Columns used (missing ones are skipped): ``time``; every ``*_energy`` column, ``
 ``mean_force_<wall>_x/_y/_z`` per wall and contact solid (the mean over each output interval;
 ``force_<wall>_*``, the value at the output time, when a history has no means);
 ``reaction_<solid>_<group>_x/_y/_z``; ``max_displacement_<solid>``; ``particles`` and ``contacts``;
-with heat, ``temperature_<body>_min/_mean/_max`` (particles and each conducting solid), ``heat_<name>`` and
-``thermal_energy`` (drawn apart from the mechanical energies, which they would dwarf).
+with heat, ``temperature_<body>_min/_mean/_max`` (particles and each conducting solid), ``heat_<name>``,
+``heat_in``, ``heat_out`` and ``thermal_energy`` (drawn apart from the mechanical energies, which they would dwarf).
 A quantity that stays constant over the whole run gets no curve (its value is named in the
 title instead), and a figure all of whose quantities are constant is not drawn.
 """
@@ -39,6 +39,8 @@ _REACTION = re.compile(r"^reaction_(.+)_([xyz])$")
 _DEFLECTION = re.compile(r"^max_displacement_(.+)$")
 _TEMPERATURE = re.compile(r"^temperature_(.+)_(min|mean|max)$")
 _HEAT = re.compile(r"^heat_(.+)$")
+# Heat content carried in by inserted and out by removed particles (not a body's heat_<name>).
+_CARRIED_HEAT = {"heat_in": "brought in by inserted particles", "heat_out": "taken out by removed particles"}
 
 
 def read_history(path) -> Dict[str, np.ndarray]:
@@ -206,7 +208,8 @@ def plot_history(outdir) -> List[Path]:
 
 def _temperature_figures(pyplot, finish, time, data) -> None:
     """temperatures.png: each body's min / mean / max temperature; heat.png: the heat each wall or solid gave
-    the particles (cumulative) beside the change of the heat content, which it balances."""
+    the particles (cumulative), and what inserted particles brought in and removed ones took out (drawn negative),
+    beside the change of the heat content, which they balance."""
     bodies: Dict[str, Dict[str, str]] = {}
     for column in data:
         match = _TEMPERATURE.match(column)
@@ -222,14 +225,23 @@ def _temperature_figures(pyplot, finish, time, data) -> None:
                 axes.fill_between(time, data[columns["min"]], data[columns["max"]], color=color, alpha=0.2,
                                   label=f"{body} (min to max)")
         finish(figure, axes, "temperature [K]", "temperatures", "", "temperatures.png")
-    flows = {match.group(1): column for column in data if (match := _HEAT.match(column))}
-    if any(not is_constant(data[column]) for column in flows.values()):
+    flows = {match.group(1): column for column in data
+             if (match := _HEAT.match(column)) and column not in _CARRIED_HEAT}
+    # Without streams, outlets or losses these stay zero: no curve.
+    carried = [column for column in _CARRIED_HEAT if column in data and not is_constant(data[column])]
+    if any(not is_constant(data[column]) for column in [*flows.values(), *carried]):
         figure, axes = pyplot.subplots(figsize=(7, 4.5))
         for body, column in flows.items():
             axes.plot(time, data[column], label=f"given by {body}")
+        for column in carried:
+            sign = -1.0 if column == "heat_out" else 1.0  # what leaves lowers the content
+            axes.plot(time, sign * data[column], label=_CARRIED_HEAT[column] + (" (negative)" if sign < 0 else ""))
         if "particle_thermal_energy" in data:
             gained = data["particle_thermal_energy"] - data["particle_thermal_energy"][0]
             axes.plot(time, gained, "k--", label="particles' heat content change")
+            if carried:  # the books' sum, drawn over the change it balances
+                books = sum(data[column] for column in flows.values()) + data["heat_in"] - data["heat_out"]
+                axes.plot(time, books, ":", color="0.5", linewidth=2.5, label="sum of the books (in - out included)")
         finish(figure, axes, "heat [J]", "heat given to the particles (cumulative)", "", "heat.png")
 
 

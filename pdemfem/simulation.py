@@ -364,6 +364,7 @@ class Simulation:
         if self.particle_system.heat:
             columns += ["thermal_energy", "particle_thermal_energy"]
             columns += [f"heat_{name}" for name in self.particle_system.heat_ledger.names]
+            columns += ["heat_in", "heat_out"]
             columns += [f"temperature_{body}_{statistic}" for body in ["particles", *self._conducting_solids()]
                         for statistic in ("min", "mean", "max")]
             columns += [f"boundary_heat_{name}_{book}" for name in self._conducting_solids()
@@ -389,6 +390,7 @@ class Simulation:
         row.update(self.energies())
         if system.heat:
             row.update(self.heat_given())
+            row.update(self.heat_carried())
             row.update(self.temperature_statistics())
             for name in self._conducting_solids():
                 for book, value in self.solids[name].boundary_heat().items():
@@ -533,6 +535,13 @@ class Simulation:
         start (negative: the particles heated it)."""
         ledger = self.particle_system.heat_ledger
         return {f"heat_{name}": float(value) for name, value in zip(ledger.names, ledger.settle(self.comm))}
+
+    def heat_carried(self) -> dict:
+        """Collective: heat_in and heat_out [J], the heat content m c T of the particles inserted (streams) and of
+        those removed (outlets, the domain box) since the start; with heat_given they close the particles' heat
+        balance: particle_thermal_energy(t) - particle_thermal_energy(0) = sum heat_<name> + heat_in - heat_out."""
+        heat_in, heat_out = self.particle_system.carried_heat.settle(self.comm)
+        return {"heat_in": float(heat_in), "heat_out": float(heat_out)}
 
     def _moving_solids(self) -> list:
         return [name for name, solid in self.solids.items() if solid.frame is not None]

@@ -256,6 +256,54 @@ def test_thermal_step_past_the_limit_is_warned_by_check_and_stops_the_run(tmp_pa
     Simulation.from_dict(scene).run(progress=False)
 
 
+def _estimated_and_measured_ratio(scene, seconds):
+    """(`pdemfem check`'s estimate of the largest dt sum(H) / (m c), the run-time guard's measure of it over
+    `seconds` of the run, the check's warnings)."""
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import load_scene
+
+    loaded, _ = load_scene(scene)
+    sim = Simulation.from_dict(scene)
+    limit, _ = derived.thermal_step_limit(loaded)
+    sim.step(int(round(seconds / sim.dt)))
+    sim.energies()  # reduces the guard's running maximum over the ranks
+    return sim.dt / limit, sim.particle_system.largest_heat_step_ratio, derived.warnings(loaded)
+
+
+def test_check_estimates_the_thermal_step_ratio_of_a_sphere_resting_on_a_hot_floor():
+    """The estimate takes 12 contacts, one at the overlap of a settling impact (a drop by one diameter: its
+    contact radius is 6.7x the resting one here) and 11 pressed by the sphere's weight, where the lone sphere
+    has one at rest: 11 + 6.7 = 17.7x the measured ratio.  With c such that the real ratio is 0.014 it does
+    not warn (15 contacts at the impact's overlap said 1.4 of the limit: 101x)."""
+    scene, _ = _stack_scene(1.0e-3, 0.7e-3, floor_temperature=500.0)
+    scene["particles"] = scene["particles"][:1]
+    estimate, measured, _ = _estimated_and_measured_ratio(scene, 0.02)
+    print(f"lone sphere: estimate {estimate:.4g}, measured {measured:.4g} ({estimate / measured:.3g}x)")
+    assert measured <= estimate <= 20.0 * measured
+    scene["materials"]["grain"]["heat_capacity"] *= measured / 0.014
+    estimate, measured, warnings = _estimated_and_measured_ratio(scene, 0.02)
+    assert measured == pytest.approx(0.014, rel=1e-9)
+    assert not any("thermal step limit" in warning for warning in warnings), warnings
+    assert measured <= estimate < 1.0
+
+
+def test_check_estimates_the_thermal_step_ratio_of_a_settling_bed_within_a_few_times():
+    """350 spheres (radius 1 mm +- 20 %) settle into a ~10-layer bed on a hot floor: the guard's largest ratio
+    comes from the impacts while the bed settles onto the pressed bottom layers.  The estimate must stay
+    above it (else `check` would pass a run that the guard stops) and be realistic: within 3x (measured
+    1.85x; 15 contacts at the impact's overlap gave 8x)."""
+    from mpi_cases.dem_scenes import dense_scene
+
+    scene = dense_scene(count=350, velocity=(0.0, 0.0, 0.0))
+    scene["materials"]["glass"].update(conductivity=1.0, heat_capacity=5.0e-3)
+    scene["particles"][0]["initial_temperature"] = 300.0
+    scene["walls"][0]["temperature"] = 400.0
+    estimate, measured, _ = _estimated_and_measured_ratio(scene, 0.15)
+    print(f"settling bed: estimate {estimate:.4g}, measured {measured:.4g} ({estimate / measured:.3g}x)")
+    assert measured > 0.2  # the bed conducts: a real comparison
+    assert measured <= estimate <= 3.0 * measured
+
+
 def test_history_columns_and_plots_of_a_heated_run(tmp_path):
     """history.csv carries the heat columns; pdemfem plot draws temperatures.png and heat.png, and the
     energies figure leaves the heat content out (it would dwarf the mechanical energies)."""

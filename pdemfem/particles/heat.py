@@ -56,7 +56,9 @@ def material_heat_capacities(scene, material_names) -> np.ndarray:
 
 
 class HeatLedger:
-    """Heat [J] that bodies (walls, solids' surfaces) gave the particles, one entry per body.
+    """Heat [J] booked per rank and summed over the ranks only when read, one entry per name: what
+    bodies (walls, solids' surfaces) gave the particles, or what particles carried in and out
+    (CarriedHeat).
 
     Kernels add flow x dt to `pending` (this rank's contacts, no communication per step);
     `settle` (collective) moves the ranks' pending sums into `total`, the same on every rank.
@@ -78,3 +80,22 @@ class HeatLedger:
         self.total += pending
         self.pending[:] = 0.0
         return self.total.copy()
+
+
+class CarriedHeat(HeatLedger):
+    """Heat content m c T [J] (as thermal_energy counts it) that particles inserted since the start brought
+    in ("in": streams) and particles removed since the start took out ("out": outlets, the domain box,
+    non-finite positions).  Booked on the rank that inserts or removes them, at list rebuilds; with the
+    bodies' heat_<name> these close the particles' heat balance:
+    content(t) - content(0) = sum heat_<name> + in - out."""
+
+    IN, OUT = 0, 1
+
+    def __init__(self):
+        super().__init__(("in", "out"))
+
+    def book_in(self, heat: float) -> None:
+        self.pending[self.IN] += heat
+
+    def book_out(self, heat: float) -> None:
+        self.pending[self.OUT] += heat

@@ -22,7 +22,8 @@ Their per-particle contact history lives in state.fields (ParticleState.add_fiel
 so it is reordered and migrated with the particles.
 
 Particles come and go at list rebuilds: streams append new ones (add_particles), and the
-particles beyond the domain box or in an outlet (pdemfem.particles.outlet) are removed.
+particles beyond the domain box or in an outlet (pdemfem.particles.outlet) are removed.  With heat
+on, the heat content they bring in and take out is booked where that happens (carried_heat).
 
 Rigid clumps (pdemfem.clumps.bodies.ClumpBodies, `clumps`): their member spheres are rows of the
 state; the clumps integrate the free spheres and the bodies (members follow their bodies) and sum
@@ -49,7 +50,8 @@ from pdemfem.parallel.decomposition import Decomposition, add_pair_costs, recurs
 from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.parallel.reductions import StepReductions
 from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
-from pdemfem.particles.heat import NO_HEAT_FLOWS, NO_TEMPERATURES, HeatLedger, heat_content, update_temperatures
+from pdemfem.particles.heat import (NO_HEAT_FLOWS, NO_TEMPERATURES, CarriedHeat, HeatLedger, heat_content,
+                                    update_temperatures)
 from pdemfem.particles.integrate import kick, kick_drift, outside_domain
 
 log = logging.getLogger("pdemfem")
@@ -100,6 +102,8 @@ class ParticleSystem(kinds.StateComponent):
                                 else np.zeros(0))
         # Heat the walls and surfaces gave the particles (plane walls, then contributors).
         self.heat_ledger = HeatLedger(list(walls.names) + [body.name for body in self.contributors])
+        # Heat content inserted particles brought in and removed ones took out (heat on only).
+        self.carried_heat = CarriedHeat()
         self.heat_step_ratio = 0.0  # largest dt sum(H) / (m c) of an owned particle so far (this rank)
         self.largest_heat_step_ratio = 0.0  # the same over the ranks, at the last energies() call
         self.thermal_energy = 0.0  # heat content m c T of the particles [J], at the last energies() call
@@ -165,6 +169,9 @@ class ParticleSystem(kinds.StateComponent):
             for contributor in self.contributors:
                 if getattr(contributor, "vertex_heat", None) is not None:
                     contributor.vertex_heat[:] = 0.0
+            # Particles the first build removed (beyond the domain box) were never in the starting heat
+            # content (the first history row is taken after it): they took nothing out of it.
+            self.carried_heat.pending[:] = 0.0
 
     def _check_periodic_lengths(self):
         from pdemfem.errors import SceneError
@@ -263,6 +270,7 @@ class ParticleSystem(kinds.StateComponent):
                             "rebalances": kinds.scalar(int(self.rebalances))}
         if self.heat:
             result["totals"]["heat_given"] = kinds.global_array(self.heat_ledger.settle(self.comm))
+            result["totals"]["heat_carried"] = kinds.global_array(self.carried_heat.settle(self.comm))
             result["totals"]["heat_step_ratio"] = kinds.scalar(float(self.comm.allreduce(self.heat_step_ratio,
                                                                                          op=MPI.MAX)))
         return result
@@ -297,6 +305,19 @@ class ParticleSystem(kinds.StateComponent):
             self.heat_ledger.total[:] = np.asarray(totals["heat_given"], dtype=float)
             self.heat_ledger.pending[:] = 0.0
             self.heat_step_ratio = float(totals["heat_step_ratio"])
+            self._load_carried_heat(totals)
+
+    def _load_carried_heat(self, totals: dict) -> None:
+        """The heat carried in and out so far; a checkpoint written before these were booked has none: they
+        start at zero here (the balance closes from the restart's heat content on, warned)."""
+        self.carried_heat.pending[:] = 0.0
+        if "heat_carried" in totals:
+            self.carried_heat.total[:] = np.asarray(totals["heat_carried"], dtype=float)
+            return
+        self.carried_heat.total[:] = 0.0
+        if self.comm.rank == 0:
+            log.warning("the checkpoint holds no heat_in / heat_out totals (written by an older pdemfem): they count "
+                        "from the restart on, so the heat balance closes from the restart's thermal_energy")
 
     def canonicalize(self) -> None:
         self.canonical_rebuild()
@@ -309,6 +330,9 @@ class ParticleSystem(kinds.StateComponent):
         state = self.state
         records = self._contact_records()  # while the ghost rows are there
         state.drop_ghosts()
+        if self.heat:
+            self.carried_heat.book_in(heat_content(new_state.count, new_state.temperatures, new_state.mass,
+                                                   new_state.material_index, self.heat_capacities))
         state.append_particles(new_state)
         carried = [name for name in state.field_names("checkpoint") if not state.registry[name].migrate]
         for name in carried:
@@ -469,8 +493,16 @@ class ParticleSystem(kinds.StateComponent):
         if self.outlets is not None:  # particles an outlet takes are counted there (collective)
             outside |= self.outlets.take(state, ~outside, self.gravity, self.comm)
         if np.any(outside):
+            if self.heat:
+                self.carried_heat.book_out(self._heat_content_of(np.flatnonzero(outside)))
             state.keep(np.flatnonzero(~outside))
         return ~outside
+
+    def _heat_content_of(self, rows: np.ndarray) -> float:
+        """m c T [J] of the given rows, each particle's term as heat_content (thermal_energy) takes it."""
+        state = self.state
+        return heat_content(len(rows), state.temperatures[rows], state.mass[rows], state.material_index[rows],
+                            self.heat_capacities)
 
     def _sort_owned(self):
         """Order owned particles by cell so that neighbours are close in memory.  Returns the ghost selection

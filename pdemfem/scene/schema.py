@@ -502,6 +502,12 @@ class Scene(StrictModel):
                              f"namespace (wall_force, history columns): rename one")
         if self.heat_enabled:
             self._heat_materials()
+            # heat_<name> is the heat wall or solid <name> gave the particles: these would read as heat_in, heat_out.
+            carried = sorted(set(surface_names) & {"in", "out"})
+            if carried:
+                raise ValueError(f"walls/solids: with heat on the names {carried} are taken (history columns "
+                                 f"heat_in and heat_out: heat the inserted particles brought in and the removed "
+                                 f"ones took out); rename them")
         elif "temperature" in self.output.particles and "particles" in self.output.model_fields_set:
             raise ValueError("output.particles: temperature is written only with heat on; give a particle group "
                              "initial_temperature (or heat: {enabled: true}), or remove temperature from the list")

@@ -122,6 +122,7 @@ def gather_state(simulation) -> dict | None:
             solids[f"solid:{name}:v"] = np.concatenate([r[2] for r in rows])[order]
     energies = simulation.energies()
     heat_given = simulation.heat_given() if system.heat else {}
+    heat_carried = simulation.heat_carried() if system.heat else {}
     if comm.rank != 0:
         return None
     result = {}
@@ -136,6 +137,7 @@ def gather_state(simulation) -> dict | None:
     result["scalars"] = np.array([simulation.step_count, system.lost_particles, simulation.time])
     if system.heat:
         result["heat_given"] = np.array(list(heat_given.values()))
+        result["heat_carried"] = np.array(list(heat_carried.values()))
     return result
 
 
