@@ -308,16 +308,11 @@ class ParticleSystem(kinds.StateComponent):
             self._load_carried_heat(totals)
 
     def _load_carried_heat(self, totals: dict) -> None:
-        """The heat carried in and out so far; a checkpoint written before these were booked has none: they
-        start at zero here (the balance closes from the restart's heat content on, warned)."""
+        """The heat carried in and out so far (every heated checkpoint of this format holds them)."""
+        if "heat_carried" not in totals:
+            raise kinds.StateMismatch("holds no heat_in / heat_out totals")
+        self.carried_heat.total[:] = np.asarray(totals["heat_carried"], dtype=float)
         self.carried_heat.pending[:] = 0.0
-        if "heat_carried" in totals:
-            self.carried_heat.total[:] = np.asarray(totals["heat_carried"], dtype=float)
-            return
-        self.carried_heat.total[:] = 0.0
-        if self.comm.rank == 0:
-            log.warning("the checkpoint holds no heat_in / heat_out totals (written by an older pdemfem): they count "
-                        "from the restart on, so the heat balance closes from the restart's thermal_energy")
 
     def canonicalize(self) -> None:
         self.canonical_rebuild()
