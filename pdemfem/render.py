@@ -160,19 +160,32 @@ def _cylinder_strips(wall, low, high, segments: int = 48) -> List[np.ndarray]:
 # --------------------------------------------------------------------------- drawing
 
 
+def _prefer_the_toolkit_beside(matplotlib) -> None:
+    """Look for mpl_toolkits.mplot3d first beside the matplotlib in use.  An older system matplotlib (e.g.
+    Debian's python3-matplotlib, which ParaView's package brings) beside an environment's newer one ships
+    mpl_toolkits as a regular package, which wins over the newer one's namespace package and does not
+    import with the newer matplotlib."""
+    own = Path(matplotlib.__file__).resolve().parent.parent / "mpl_toolkits"
+    if not (own / "mplot3d").is_dir() or "mpl_toolkits.mplot3d" in sys.modules:
+        return
+    import mpl_toolkits
+
+    search = mpl_toolkits.__path__
+    if isinstance(search, list) and str(own) not in search:  # a namespace package's path already holds it
+        search.insert(0, str(own))
+
+
 def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
+        _prefer_the_toolkit_beside(matplotlib)  # before pyplot, whose projections register mplot3d's '3d'
         from matplotlib import pyplot
         try:
             from mpl_toolkits.mplot3d.art3d import Poly3DCollection
         except ImportError as error:
-            # An older system matplotlib (e.g. Debian's python3-matplotlib, which ParaView's package brings)
-            # beside the environment's own: its mpl_toolkits is a regular package and wins over the newer
-            # one's namespace package, and does not import with the newer matplotlib.
             raise PdemfemError("matplotlib's 3-D toolkit (mpl_toolkits.mplot3d)", f"does not import: {error}",
                                f"two matplotlib installations are mixed (this one: {matplotlib.__file__}); "
                                "keep one: remove the system's (apt-get remove python3-matplotlib) or this "

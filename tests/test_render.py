@@ -3,7 +3,9 @@ installed), and the committed gallery."""
 from __future__ import annotations
 
 import copy
+import os
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -70,7 +72,13 @@ def test_render_draws_particles_solids_and_walls(tiny_run, tmp_path):
     assert (tmp_path / "cli.png").read_bytes()[:8] == PNG
 
 
-@pytest.mark.skipif(shutil.which("pvpython") is None, reason="pvpython not on PATH (Debian package paraview)")
+# An X11 build of ParaView (Debian's) needs an X display even offscreen: $DISPLAY, or Xvfb which render starts.
+PARAVIEW_HAS_A_DISPLAY = (not sys.platform.startswith("linux") or bool(os.environ.get("DISPLAY"))
+                          or shutil.which("Xvfb") is not None)
+
+
+@pytest.mark.skipif(shutil.which("pvpython") is None or not PARAVIEW_HAS_A_DISPLAY,
+                    reason="pvpython not on PATH (Debian package paraview) or no X display nor Xvfb for it")
 def test_paraview_draws_the_run(tiny_run, tmp_path, capsys):
     scene_file, out = tiny_run
     picture, used = draw_output(out, scene=scene_file, target=tmp_path / "paraview.png", renderer="paraview")
@@ -89,6 +97,19 @@ def test_paraview_draws_the_run(tiny_run, tmp_path, capsys):
     assert cli.main(["render", str(out), "--scene", str(scene_file), "-o", str(tmp_path / "auto.png")]) == 0
     assert _png_size(tmp_path / "auto.png") == PICTURE_SIZE
     assert "ParaView could not" not in capsys.readouterr().err
+
+
+@pytest.mark.skipif(shutil.which("pvpython") is None or PARAVIEW_HAS_A_DISPLAY,
+                    reason="needs pvpython on a Linux host without an X display and without Xvfb")
+def test_paraview_without_a_display_names_the_fix_and_auto_falls_back_to_matplotlib(tiny_run, tmp_path, capsys):
+    scene_file, out = tiny_run
+    assert cli.main(["render", str(out), "-o", str(tmp_path / "x.png"), "--renderer", "paraview"]) == 2
+    assert "install Xvfb (apt-get install xvfb)" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()
+    # auto: ParaView is tried, fails, and matplotlib draws the picture with a warning naming the reason.
+    assert cli.main(["render", str(out), "--scene", str(scene_file), "-o", str(tmp_path / "auto.png")]) == 0
+    assert _png_size(tmp_path / "auto.png") == PICTURE_SIZE
+    assert "ParaView could not draw auto.png" in capsys.readouterr().err
 
 
 def test_renderer_paraview_without_pvpython_names_the_fix(tiny_run, tmp_path, monkeypatch, capsys):

@@ -245,8 +245,9 @@ def test_cohesive_rolling_heated_moving_restarts_bit_identical_on_one_and_two_ra
         restart_scenes.pile_scene(tmp_path / "probe", steps, EVERY, EVERY))))
     with restart_scenes.cross_rank_static_solve():
         probe = Simulation.from_dict(scene, base_dir=tmp_path)
-    # Tangential spring and the force it applied (6), rolling spring (3), their energy, touching flag.
-    assert probe.particle_system.tables.history_width == 11
+    # Tangential spring and the force it applied (6), the rolling moment applied (3) and rolling spring (3),
+    # their energy, touching flag.
+    assert probe.particle_system.tables.history_width == 14
     probe.run(progress=False)  # the step counts the tolerance needs
     assert_identical(results[1], restart_scenes.gather_state(probe))
     assert_close(results[1], results[2], round_off_tolerance(probe))
