@@ -306,8 +306,9 @@ def _command_run(arguments, comm) -> int:
                                f"run without --{name}")
     try:
         simulation = Simulation.from_file(arguments.scene, comm=comm, output_dir=arguments.output, **options)
-    except PdemfemError as error:
-        located = _name_the_file(error, arguments.scene)
+    except (PdemfemError, *OUT_OF_RANGE) as error:
+        located = (_name_the_file(error, arguments.scene) if isinstance(error, PdemfemError)
+                   else _out_of_range(arguments.scene, error))
         if not existed:
             located.cleanup_dir = output_dir
         raise located from None
@@ -373,11 +374,19 @@ def check_report(path: str) -> tuple:
         raise _name_the_file(error, path) from None
     try:
         return _report(path, scene, base_dir, placed, solids, mesh_warnings)
-    except (OverflowError, ZeroDivisionError, FloatingPointError) as error:
-        # The schema's bounds cannot catch every combination of extreme values (a modulus near
-        # the float64 limit, ...); report it as the scene's fault, not with a traceback.
-        raise SceneError(str(path), f"the scene's numbers are out of range for the derived quantities ({error})",
-                         "check the magnitudes and units of the moduli, densities, radii and coordinates") from None
+    except OUT_OF_RANGE as error:
+        raise _out_of_range(path, error) from None
+
+
+# The schema's bounds cannot catch every combination of extreme values (a modulus near the float64 limit, a
+# step of 1e300 s in a run as long, ...): what they overflow is reported as the scene's fault, not with a traceback.
+OUT_OF_RANGE = (OverflowError, ZeroDivisionError, FloatingPointError)
+
+
+def _out_of_range(path, error) -> SceneError:
+    return SceneError(str(path), f"the scene's numbers are out of range for the derived quantities ({error})",
+                      "check the magnitudes and units of time.dt and time.end, the moduli, densities, radii and "
+                      "coordinates")
 
 
 def _validate_as_run(scene, base_dir) -> tuple:

@@ -279,3 +279,21 @@ def test_a_resting_linear_contact_with_a_derived_stiffness_names_the_keys(workdi
     # Either key makes it a valid scene.
     code, _, err = check(capsys, workdir, RESTING_LINEAR.replace("restitution: 0.5,", "restitution: 0.5, normal_stiffness: 1.0e6,"))
     assert code == 0, err
+
+
+# ----------------------------------------------------------------- extreme time settings
+
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_a_step_longer_than_the_run_names_time_dt(workdir, capsys, command):
+    code, _, err = check(capsys, workdir, PLATE_SCENE.replace("dt: auto, dt_factor: 0.1", "dt: 1.0e300"), command)
+    assert_one_error(code, err, "time: dt = 1e+300 s is longer than end = 0.002 s", "dt: auto")
+    assert not (workdir / "out").exists()
+
+
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_a_step_and_end_that_overflow_the_derived_quantities_are_a_scene_error(workdir, capsys, command):
+    # Legal each, but the plate's held-force and contact checks square the step: 1e600 overflows.
+    huge = PLATE_SCENE.replace("end: 0.002, dt: auto, dt_factor: 0.1", "end: 1.0e301, dt: 1.0e300")
+    code, _, err = check(capsys, workdir, huge, command)
+    assert_one_error(code, err, "out of range for the derived quantities", "time.dt and time.end")
+    assert not (workdir / "out").exists()

@@ -30,6 +30,13 @@ class TimeConfig(StrictModel):
         None, description="largest impact speed [m/s] for the contact-duration check; estimated when absent"
     )
 
+    @model_validator(mode="after")
+    def _step_within_the_run(self):
+        if self.dt != "auto" and self.dt > self.end:
+            raise ValueError(f"dt = {self.dt:g} s is longer than end = {self.end:g} s: the run could not take one step "
+                             "of it; give a dt below end (the contacts want far smaller: dt: auto derives it)")
+        return self
+
 
 class MaterialConfig(StrictModel):
     density: PositiveFloat = Field(description="mass density [kg/m^3] (particle mass = 4/3 pi r^3 density)")
