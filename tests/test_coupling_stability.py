@@ -292,3 +292,32 @@ def test_undamped_rest_on_a_substepped_soft_block_keeps_its_energy(tmp_path, ele
     assert sim.coupling.fem_substeps["block"] >= 2  # the case needs sub-steps
     assert max(changes) <= bound, (element, [c / bound for c in changes])
     assert speeds[-1] <= max(speeds[:len(speeds) // 2]), (element, speeds)  # as in the map above
+
+
+def test_check_and_run_name_a_damping_that_shrinks_the_fe_step(tmp_path):
+    """Stiffness-proportional damping overdamps the mesh's highest mode: with beta omega_max >> 1 the FE
+    critical step shrinks ~ beta omega_max / 2 times (every advance takes as many more sub-steps).  Both check
+    and run name it with 1/omega_max; beta below 1/omega_max (at most 0.62 of the step lost) is silent."""
+    import yaml
+
+    from pdemfem import Simulation
+    from pdemfem.cli import check_report
+    from pdemfem.fem.stability import critical_step
+
+    scene = resting_scene(4, end=1e-3)
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    simulation = Simulation.from_dict(scene, output_dir=str(tmp_path / "probe"))
+    omega = simulation.solids["block"].largest_frequency_bound()
+    for beta, named in ((0.5 / omega, False), (20.0 / omega, True)):
+        scene["solids"][0]["damping"] = {"alpha": 0.0, "beta": beta}
+        path.write_text(yaml.safe_dump(scene))
+        _, warnings = check_report(str(path))
+        found = [warning for warning in warnings if "shrinks the FE critical step" in warning]
+        assert len(found) == (1 if named else 0), (beta, warnings)
+        simulation = Simulation.from_dict(scene, output_dir=str(tmp_path / f"run{beta:g}"))
+        assert [w for w in simulation.coupling_warnings if "shrinks the FE critical step" in w] == found
+        if named:
+            shrink = critical_step(omega, 0.0, 0.0) / critical_step(omega, 0.0, beta)
+            assert f"{shrink:.3g}x" in found[0] and f"1/omega_max = {1.0 / omega:.3g} s" in found[0]
+            assert shrink > 10.0  # beta omega_max = 20: xi = 10, the step 2/omega (sqrt(101) - 10) = 2/omega / 20.05
