@@ -5,7 +5,7 @@
                                   (those with data)
 
 Columns used (missing ones are skipped): ``time``; every ``*_energy`` column, ``wall_work``,
-``thermoelastic_work`` and ``frame_work``;
+``thermoelastic_work``, ``frame_work`` and ``support_work``;
 ``mean_force_<wall>_x/_y/_z`` per wall and contact solid (the mean over each output interval;
 ``force_<wall>_*``, the value at the output time, when a history has no means);
 ``reaction_<solid>_<group>_x/_y/_z``; ``max_displacement_<solid>``; ``particles`` and ``contacts``;
@@ -160,7 +160,7 @@ def plot_history(outdir) -> List[Path]:
 
     # Work done on the system (and the streams' net energy brought in), subtracted from the total as
     # pdemfem.monitor.total_energy does.
-    fed_in = ("wall_work", "thermoelastic_work", "stream_energy", "frame_work")
+    fed_in = ("wall_work", "thermoelastic_work", "stream_energy", "frame_work", "support_work")
     energies = [name for name in data if (name.endswith("_energy") or name in (*fed_in, "solid_load_potential"))
                 and name not in THERMAL_ENERGIES]  # heat content has its own figure (heat.png)
     varying = [name for name in energies if not is_constant(data[name])]

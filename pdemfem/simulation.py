@@ -357,6 +357,8 @@ class Simulation:
             columns += ["solid_kinetic_energy", "solid_strain_energy", "solid_load_potential"]
         if self._conducting_solids():
             columns += ["thermoelastic_work"]
+        if self._prescribed_solids():
+            columns += ["support_work"]
         if self._moving_solids():
             columns += ["frame_work"]
         if self._free_axle_solids():
@@ -506,6 +508,9 @@ class Simulation:
         # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
         energies["solid_load_potential"] = -sum(solid.constant_load_vec.dot(solid.displacement_vec)
                                                 for solid in self.solids.values())
+        if self._prescribed_solids():
+            # Work the prescribed groups' reactions fed in (zero where they hold their nodes still).
+            energies["support_work"] = sum(self.solids[name].support_work for name in self._prescribed_solids())
         if self._moving_solids():
             # Work the solids' prescribed rigid motions fed in (fem/frame.py): through their frames' loads on the
             # elastic motion, and through their surfaces on the particles.
@@ -542,6 +547,9 @@ class Simulation:
         balance: particle_thermal_energy(t) - particle_thermal_energy(0) = sum heat_<name> + heat_in - heat_out."""
         heat_in, heat_out = self.particle_system.carried_heat.settle(self.comm)
         return {"heat_in": float(heat_in), "heat_out": float(heat_out)}
+
+    def _prescribed_solids(self) -> list:
+        return [config.name for config in self.scene.solids if config.prescribed]
 
     def _moving_solids(self) -> list:
         return [name for name, solid in self.solids.items() if solid.frame is not None]

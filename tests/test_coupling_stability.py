@@ -14,6 +14,8 @@ lumped/consistent mass, restitution, friction, DEM dt up to the automatic step, 
 * the sphere stays at the Hertz rest overlap within 1 % (the block's local sag under the sphere, ~2e-4
   of the overlap, is the deviation measured).
 """
+import copy
+
 import pytest
 
 from stability_cases import GRAVITY, LevelEnergy, resting_scene, run_resting, verlet_energy_bound
@@ -112,10 +114,16 @@ def test_point_load_limit_warns_in_check_and_names_the_cause_when_run_diverges(t
         path.write_text(yaml.safe_dump(scene))
         _, warnings = check_report(str(path))
         assert sum("stiffer than the surface under it" in w for w in warnings) == expected, (name, warnings)
-    code = cli.main(["run", str(tmp_path / "soft.yaml"), "--quiet", "-o", str(tmp_path / "out")])
-    err = capsys.readouterr().err
-    assert code == 3, err
-    assert "likely cause: solid block: a contact of group b is stiffer than the surface under it" in err
+    # The same support as a prescribed zero displacement: its work is booked (zero), so the energy test stays on.
+    held = copy.deepcopy(soft)
+    assert held["solids"][0].pop("fixed") == ["zmin"]
+    held["solids"][0]["prescribed"] = [{"group": "zmin", "displacement": [0.0, 0.0, 0.0]}]
+    (tmp_path / "held.yaml").write_text(yaml.safe_dump(held))
+    for name in ("soft", "held"):
+        code = cli.main(["run", str(tmp_path / f"{name}.yaml"), "--quiet", "-o", str(tmp_path / f"out_{name}")])
+        err = capsys.readouterr().err
+        assert code == 3, (name, err)
+        assert "likely cause: solid block: a contact of group b is stiffer than the surface under it" in err
 
 
 def test_check_uses_the_contact_modulus_the_contact_law_uses(tmp_path):

@@ -243,15 +243,22 @@ def cell_stresses(coords, cells, n_cells, displacement, delta_t, centroid_grads,
 @njit(cache=True)
 def central_difference_update(u, v, acceleration, internal, base_load, nodal_load, load, inverse_mass, constrained,
                               prescribed_velocity, dt, decay, gain, lumped, clear_nodal):
-    """One explicit step on owned dofs (flat arrays); returns this rank's external work increment.
+    """One explicit step on owned dofs (flat arrays); returns this rank's increments of the external work and
+    of the supports' work alone, and the supports' work over the second half of this step.
 
     load = base_load + nodal_load (nodal_load then cleared when asked); M a = load - internal at free dofs (a = (load - internal) * inverse_mass when lumped, else
     `acceleration` holds the solve's result); v+ = decay * v + gain * dt * a; constrained dofs take
     their prescribed velocity; u += dt * v+.  Work uses the midpoint displacement increment
     dt (v- + v+)/2 with the applied load at free dofs and the support force (= internal, a = 0) at
-    constrained ones.
+    constrained ones.  The supports' own work is their reaction (internal - load, a = 0) on the same increment:
+    zero where they hold a node still, the energy a prescribed velocity feeds in otherwise.  That increment is
+    centred on u^n while the strain energy is read at u^{n+1}: the reaction's work over the half step
+    dt v+ / 2 closes the gap (without it the books lag by the current reaction's work over half a step, which
+    grows with the reaction).
     """
     work = 0.0
+    support_work = 0.0
+    support_half_step = 0.0
     for i in range(u.shape[0]):
         f = base_load[i] + nodal_load[i]
         load[i] = f  # kept for reactions
@@ -261,6 +268,8 @@ def central_difference_update(u, v, acceleration, internal, base_load, nodal_loa
             a = 0.0
             v_new = prescribed_velocity[i]
             force = internal[i]
+            support_work += (internal[i] - f) * 0.5 * dt * (v[i] + v_new)
+            support_half_step += (internal[i] - f) * 0.5 * dt * v_new
         else:
             if lumped:
                 a = (f - internal[i]) * inverse_mass[i]
@@ -272,7 +281,7 @@ def central_difference_update(u, v, acceleration, internal, base_load, nodal_loa
         work += force * 0.5 * dt * (v[i] + v_new)
         v[i] = v_new
         u[i] += dt * v_new
-    return work
+    return work, support_work, support_half_step
 
 
 @njit(cache=True)

@@ -194,6 +194,9 @@ class Solid(kinds.StateComponent):
         # reading, and this rank's work since (a step makes no reduction for it: read it at output).
         self._external_work_summed = 0.0
         self._external_work_local = 0.0
+        self._support_work_summed = 0.0
+        self._support_work_local = 0.0
+        self._support_half_step = 0.0  # this rank's: the supports' work over the second half of the last step
         self._thermal_energy = 0.0
         self.heat = None  # the heat equation (heat.SolidHeat) when this solid conducts heat
         self.thermoelastic_work = 0.0  # strain energy the temperature changes of the heat path put in [J]
@@ -542,7 +545,7 @@ class Solid(kinds.StateComponent):
         decay, gain = (1.0 - half_alpha) / (1.0 + half_alpha), 1.0 / (1.0 + half_alpha)
         # getArray() views: petsc4py restores (and bumps the state of) each Vec before the kernel writes
         # in place, and nothing reads a cached norm in between, so no copies are needed.
-        work = kernels.central_difference_update(
+        work, support_work, self._support_half_step = kernels.central_difference_update(
             self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
             self.internal_force_vec.getArray(readonly=True), base_load.getArray(readonly=True),
             self.nodal_force_vec.getArray(), self.load_vec.getArray(), self._inverse_lumped_mass, self._constrained,
@@ -562,6 +565,7 @@ class Solid(kinds.StateComponent):
             kernels.remove_nodal_forces(self._damped_nodes[self._spring_rows], spring_forces,
                                         self.nodal_force_vec.getArray())
         self._external_work_local += work
+        self._support_work_local += support_work
         self.time += dt
         self.step_count += 1
         if self.step_count % BLOWUP_CHECK_EVERY == 0:
@@ -616,6 +620,22 @@ class Solid(kinds.StateComponent):
     def external_work(self, value: float) -> None:
         self._external_work_summed = float(value)
         self._external_work_local = 0.0
+
+    @property
+    def support_work(self) -> float:
+        """Collective: work [J] the fixed and prescribed groups' reactions did since construction, summed over the
+        ranks: zero for groups held still (fixed, a constant prescribed displacement), the energy a prescribed
+        velocity feeds in."""
+        booked, half_step = self._settle_support_work()
+        return booked + half_step
+
+    def _settle_support_work(self) -> tuple:
+        """Collective: (the supports' work booked up to the last step's middle, the half step after it)."""
+        summed = np.array([self._support_work_local, self._support_half_step])
+        self.comm.Allreduce(MPI.IN_PLACE, summed, op=MPI.SUM)
+        self._support_work_summed += float(summed[0])
+        self._support_work_local = 0.0
+        return self._support_work_summed, float(summed[1])
 
     @property
     def frame_work(self) -> float:
@@ -695,6 +715,9 @@ class Solid(kinds.StateComponent):
         state["time"] = kinds.scalar(float(self.time))
         state["step_count"] = kinds.scalar(int(self.step_count))
         state["external_work"] = kinds.scalar(float(self.external_work))
+        booked, half_step = self._settle_support_work()
+        state["support_work"] = kinds.scalar(booked)
+        state["support_half_step"] = kinds.scalar(half_step)
         if self.frame is not None:
             state["frame_work"] = kinds.scalar(float(self.frame_work))
             state["frame"] = {key: kinds.scalar(float(value)) for key, value in self.frame.state().items()}
@@ -718,6 +741,9 @@ class Solid(kinds.StateComponent):
         self.displacement_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
         self.time, self.step_count = float(state["time"]), int(state["step_count"])
         self.external_work = float(state["external_work"])
+        # The last step's half, held by rank 0 alone: the sum over the ranks reads it back unchanged.
+        self._support_half_step = float(state["support_half_step"]) if self.comm.rank == 0 else 0.0
+        self._support_work_summed, self._support_work_local = float(state["support_work"]), 0.0
         if (self.frame is None) != ("frame_work" not in state):
             here, there = ("has no", "has") if self.frame is None else ("has", "has no")
             raise kinds.StateMismatch(f"solid '{self.name}' {here} motion: in this scene, it {there} in the checkpoint")
