@@ -95,3 +95,48 @@ def test_changed_particle_count_is_refused_even_with_force(finished, tmp_path, c
     assert "holds the 20 particles" in err and "this scene inserts 18" in err, err
     assert "particles[0].insert.count: 20 -> 18" in err and "refused even with --force" in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("change", ["moved", "added"])
+def test_changed_walls_are_refused_even_with_force(finished, tmp_path, capsys, change):
+    """The walls' positions and motion are stored state, restored by their place in the list: a moved floor
+    would silently stay where the checkpoint had it, and a reordered list would pair one wall's normal with
+    another's point (every particle behind it at the first step)."""
+    latest = finished / "results" / "checkpoints" / "latest.h5"
+    floor = "  - {name: floor, kind: plane, point: [0, 0, 0], normal: [0, 0, 1], material: glass}\n"
+    changed = {"moved": floor.replace("point: [0, 0, 0]", "point: [0, 0, -0.0005]"),
+               "added": "  - {name: side, kind: plane, point: [0, 0, 0], normal: [1, 0, 0], material: glass}\n" + floor}
+    with h5py.File(latest, "r") as handle:
+        stored = float(handle.attrs["dt"])
+    scene = tmp_path / "walls.yaml"
+    scene.write_text(SCENE.replace("end: 0.002", "end: 0.003").replace(floor, changed[change])
+                     .replace("dt: auto", f"dt: {stored!r}"))
+    code, _, err = run(capsys, "run", scene, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
+    assert code == 2, err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert "was written with other walls (walls" in err and "refused even with --force" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_changed_contact_history_width_is_refused_even_with_force(finished, tmp_path, capsys):
+    latest = finished / "results" / "checkpoints" / "latest.h5"
+    frictionless = tmp_path / "frictionless.yaml"
+    frictionless.write_text(SCENE.replace("end: 0.002", "end: 0.003")
+                            + "interactions:\n  default: {friction: 0.0}\n")
+    code, _, err = run(capsys, "run", frictionless, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
+    assert code == 2, err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert "its contacts store 7 history columns each, this scene's contact laws keep 0" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_changed_particle_density_is_named_as_taking_no_effect_on_the_particles(finished, tmp_path, capsys, caplog):
+    latest = finished / "results" / "checkpoints" / "latest.h5"
+    with h5py.File(latest, "r") as handle:
+        stored = float(handle.attrs["dt"])
+    denser = tmp_path / "denser.yaml"
+    denser.write_text(SCENE.replace("end: 0.002", "end: 0.003").replace("density: 2500", "density: 5000")
+                      .replace("dt: auto", f"dt: {stored!r}"))
+    code, _, err = run(capsys, "run", denser, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
+    assert code == 0, err
+    assert "take no effect on them: materials.glass.density: 2500.0 -> 5000.0" in caplog.text, caplog.text

@@ -293,6 +293,7 @@ class SimulationIO:
                 f"set time.dt: {stored!r} in the scene (the checkpoint's step, exactly; with --force, since time.dt "
                 f"is physics), or start afresh without --restart")
         self._refuse_other_particles(where, attributes, force)
+        self._refuse_moved_walls(where, attributes)
         if sorted(attributes.get("solids", [])) != sorted(sim.solids):
             raise CheckpointError(where, f"holds solids {attributes.get('solids')}, the scene has {list(sim.solids)}",
                                   "restart with the scene that wrote the checkpoint")
@@ -339,9 +340,38 @@ class SimulationIO:
                 "or start afresh without --restart")
         insertion_changes = [text for text in changes if ".insert." in text or ".radius" in text
                              or ".clump" in text or ".initial_temperature" in text]
+        # The particles' masses and inertia are stored with them: a density change reaches the solids only.
+        particle_materials = {group.material for group in sim.scene.particles}
+        insertion_changes += [text for text in self._changes(attributes)
+                              if any(text.startswith(f"materials.{name}.density:") for name in particle_materials)]
         if force and insertion_changes and self.comm.rank == 0:
             log.warning("restart: the checkpoint's particles are continued as stored (positions, velocities, radii, "
-                        "temperatures); these changes of the scene take no effect: %s", "; ".join(insertion_changes[:6]))
+                        "masses, temperatures); these changes of the scene take no effect on them: %s",
+                        "; ".join(insertion_changes[:6]))
+
+    def _changes(self, attributes: dict) -> list:
+        """The scene's physics changes against the checkpoint's ('key: old -> new'); [] for a file without its scene."""
+        stored_physics = attributes.get("scene_physics")
+        if not isinstance(stored_physics, dict):
+            return []
+        from pdemfem.scene.loader import physics_changes
+
+        return physics_changes(stored_physics, scene_physics(self.sim.scene), limit=1000)
+
+    def _refuse_moved_walls(self, where: str, attributes: dict) -> None:
+        """The walls' positions and motion are stored state (a moving wall's point is where its motion took it),
+        restored by each wall's place in the list: a scene whose walls were moved, turned, reordered, added or
+        removed is refused even with --force.  Their materials, temperatures and belt speeds come from the scene."""
+        taken_from_scene = (".material:", ".temperature:", ".transport_velocity")
+        changed = [text for text in self._changes(attributes)
+                   if text.startswith("walls") and not any(key in text for key in taken_from_scene)]
+        if changed:
+            raise CheckpointError(
+                where, f"was written with other walls ({'; '.join(changed[:4])}"
+                       f"{'; ...' if len(changed) > 4 else ''}): a restart continues the walls' stored positions "
+                       f"and motion, so it is refused even with --force",
+                "restore the walls (their order, geometry and motion) of the scene that wrote the checkpoint, or start "
+                "afresh without --restart; a wall's material, temperature and transport_velocity may change")
 
 
 # ====================================================================== helpers

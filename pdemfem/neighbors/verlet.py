@@ -319,6 +319,13 @@ class VerletList:
 
         pairs = np.asarray(state["pairs"])
         history = np.asarray(state["history"], dtype=np.float64)
+        # The width is the stored dataset's, the same on every rank: all refuse together.
+        if history.ndim == 2 and history.shape[1] != len(self.history_signs):
+            raise kinds.StateMismatch(
+                f"its contacts store {history.shape[1]} history columns each, this scene's contact laws keep "
+                f"{len(self.history_signs)}: a change of the contact laws that alters what a contact stores (friction "
+                f"switched on or off, the rolling model, jkr) cannot continue the stored contacts, so it is refused "
+                f"even with --force; restore the interactions of the scene that wrote the checkpoint")
         records = np.column_stack([pairs.astype(np.float64), history])  # widths from the arrays
         if comm is not None and comm.size > 1:
             records = route_records_to_owner_share(comm, ids, records)
