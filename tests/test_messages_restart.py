@@ -140,3 +140,26 @@ def test_a_changed_particle_density_is_named_as_taking_no_effect_on_the_particle
     code, _, err = run(capsys, "run", denser, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
     assert code == 0, err
     assert "take no effect on them: materials.glass.density: 2500.0 -> 5000.0" in caplog.text, caplog.text
+
+
+def test_a_forced_branch_does_not_replace_the_later_checkpoints_of_the_run_it_started_from(finished, tmp_path, capsys):
+    checkpoints = finished / "results" / "checkpoints"
+    first, last = sorted(checkpoints.glob("checkpoint_*.h5"))
+    before = last.read_bytes()
+    with h5py.File(first, "r") as handle:
+        stored = float(handle.attrs["dt"])
+    shared = f"checkpoint: {{every: 0.0015, dir: {checkpoints}}}\n"
+    branch = tmp_path / "branch.yaml"
+    branch.write_text(SCENE.replace("checkpoint: {every: 0.0015}\n", shared).replace("dt: auto", f"dt: {stored!r}")
+                      + "interactions:\n  default: {restitution: 0.3}\n")
+    code, _, err = run(capsys, "run", branch, "-o", tmp_path / "branch", "--quiet", "--restart", first, "--force")
+    assert code == 2, err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert f"holds checkpoints of later steps than the restart's ({last.name}) written with other physics" in err, err
+    assert last.read_bytes() == before
+    # The same physics continued elsewhere writes the same checkpoints again (a restart continues exactly).
+    same = tmp_path / "same.yaml"
+    same.write_text(SCENE.replace("checkpoint: {every: 0.0015}\n", shared))
+    code, _, err = run(capsys, "run", same, "-o", tmp_path / "same", "--quiet", "--restart", first)
+    assert code == 0, err
+    assert last.read_bytes() == before

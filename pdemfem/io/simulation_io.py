@@ -294,6 +294,7 @@ class SimulationIO:
                 f"is physics), or start afresh without --restart")
         self._refuse_other_particles(where, attributes, force)
         self._refuse_moved_walls(where, attributes)
+        self._refuse_replacing_other_physics(step)
         if sorted(attributes.get("solids", [])) != sorted(sim.solids):
             raise CheckpointError(where, f"holds solids {attributes.get('solids')}, the scene has {list(sim.solids)}",
                                   "restart with the scene that wrote the checkpoint")
@@ -348,6 +349,43 @@ class SimulationIO:
             log.warning("restart: the checkpoint's particles are continued as stored (positions, velocities, radii, "
                         "masses, temperatures); these changes of the scene take no effect on them: %s",
                         "; ".join(insertion_changes[:6]))
+
+    def _refuse_replacing_other_physics(self, step: int) -> None:
+        """A restart writes its checkpoints under the names of their steps, so it replaces the checkpoints of later
+        steps in its checkpoint directory.  Those of the same physics it writes again bit for bit (a restart
+        continues exactly); those of other physics (a --force branch beside the run it started from) would be lost:
+        refused, as a fresh run is refused a directory holding checkpoints it did not write."""
+        refusal = None
+        if self.comm.rank == 0:
+            import h5py
+
+            directory = checkpoint_directory(self.sim)
+            expected = scene_hash(self.sim.scene)
+            others = []
+            for path in sorted(directory.glob(f"{ckpt.PREFIX}*.h5")):
+                try:
+                    later = int(path.stem[len(ckpt.PREFIX):]) > step
+                except ValueError:
+                    continue
+                if later:
+                    try:
+                        with h5py.File(path, "r") as handle:
+                            stored = handle.attrs.get("scene_hash")
+                    except OSError:
+                        stored = None  # unreadable: not this run's to replace either
+                    if stored != expected:
+                        others.append(path.name)
+            if others:
+                refusal = (str(directory), f"holds checkpoints of later steps than the restart's ({', '.join(others[:4])}"
+                                           f"{' and more' if len(others) > 4 else ''}) written with other physics: this "
+                                           f"run would replace them, and a run never overwrites checkpoints it did not "
+                                           f"write",
+                           "give this run its own checkpoint directory (checkpoint.dir, or -o DIR with a relative "
+                           "checkpoint.dir), or move those checkpoints away")
+        if self.comm.size > 1:
+            refusal = self.comm.bcast(refusal, root=0)
+        if refusal is not None:
+            raise OutputError(*refusal)
 
     def _changes(self, attributes: dict) -> list:
         """The scene's physics changes against the checkpoint's ('key: old -> new'); [] for a file without its scene."""
