@@ -163,3 +163,37 @@ def test_a_forced_branch_does_not_replace_the_later_checkpoints_of_the_run_it_st
     code, _, err = run(capsys, "run", same, "-o", tmp_path / "same", "--quiet", "--restart", first)
     assert code == 0, err
     assert last.read_bytes() == before
+
+
+PLATE = """\
+time: {end: 0.002, dt: 2.0e-5}
+materials:
+  glass: {density: 2500, youngs_modulus: 5.0e6, poisson_ratio: 0.3}
+  alu: {density: 2700, youngs_modulus: 1.0e9, poisson_ratio: 0.33}
+particles:
+  - name: grains
+    material: glass
+    radius: 0.002
+    insert: {kind: list, positions: [[0.01, 0.01, 0.0025], [0.03, 0.03, 0.0025]]}
+solids:
+  - name: block
+    mesh: {box: [[0, 0, -0.01], [0.04, 0.04, 0]], cells: [2, 2, 1]}
+    material: alu
+    fixed: [zmin]
+    contact: [zmax]
+output: {dir: results, every: 0.001}
+checkpoint: {every: 0.001}
+"""
+
+
+def test_another_contact_surface_is_refused_even_with_force(tmp_path, capsys):
+    (tmp_path / "plate.yaml").write_text(PLATE)
+    assert cli.main(["run", str(tmp_path / "plate.yaml"), "--quiet"]) == 0
+    checkpoints = sorted((tmp_path / "results" / "checkpoints").glob("checkpoint_*.h5"))
+    wider = tmp_path / "wider.yaml"
+    wider.write_text(PLATE.replace("end: 0.002", "end: 0.003").replace("contact: [zmax]", "contact: [zmax, xmin]"))
+    code, _, err = run(capsys, "run", wider, "-o", tmp_path / "o", "--quiet", "--restart", checkpoints[-1], "--force")
+    assert code == 2, err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    # 3 x 3 nodes on top; the 3 x 2 of the xmin side share its edge of 3: 12.
+    assert "solid 'block': its contact surface has 9 nodes in the checkpoint, 12 in this scene" in err, err

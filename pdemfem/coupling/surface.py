@@ -402,8 +402,14 @@ class CoupledSurface(kinds.StateComponent):
         """After the solid's state: its surface positions mirrored; the window's sums kept on rank 0
         (the rank-local partial sums of the run that wrote them are gone)."""
         comm = self.solid.comm
+        stored = np.asarray(state["accumulated_forces"])
+        if stored.shape != self.accumulated_forces.shape:  # a global array: every rank refuses together
+            raise kinds.StateMismatch(
+                f"solid '{self.name}': its contact surface has {len(stored)} nodes in the checkpoint, "
+                f"{len(self.accumulated_forces)} in this scene (solids[].contact or the mesh changed): the surface's "
+                f"pending loads cannot continue, so it is refused even with --force")
         self.refresh_vertices()
-        self.accumulated_forces[:] = np.asarray(state["accumulated_forces"]) if comm.rank == 0 else 0.0
+        self.accumulated_forces[:] = stored if comm.rank == 0 else 0.0
         self.restore_records(state["damper_records"], comm)
         # Rank 0 keeps the window's share rows too (a checkpoint without them: none were pending, or an older
         # version's, whose records carried the blended contacts' normal springs).
