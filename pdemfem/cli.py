@@ -32,6 +32,7 @@ import argparse
 import inspect
 import math
 import os
+import re
 import shutil
 import sys
 import time
@@ -135,6 +136,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
+    arguments.petsc_options = petsc_options
     try:
         return int(arguments.handler(arguments, comm) or 0)
     except PdemfemError as error:
@@ -306,9 +308,15 @@ def _command_run(arguments, comm) -> int:
                                f"run without --{name}")
     try:
         simulation = Simulation.from_file(arguments.scene, comm=comm, output_dir=arguments.output, **options)
-    except (PdemfemError, *OUT_OF_RANGE) as error:
-        located = (_name_the_file(error, arguments.scene) if isinstance(error, PdemfemError)
-                   else _out_of_range(arguments.scene, error))
+    except Exception as error:
+        if isinstance(error, PdemfemError):
+            located = _name_the_file(error, arguments.scene)
+        elif isinstance(error, OUT_OF_RANGE):
+            located = _out_of_range(arguments.scene, error)
+        elif arguments.petsc_options and type(error).__module__.startswith("petsc4py"):
+            located = _refused_petsc_options(arguments.petsc_options, error)
+        else:
+            raise
         if not existed:
             located.cleanup_dir = output_dir
         raise located from None
@@ -344,6 +352,17 @@ def _refuse_earlier_results(scene, base_dir, output_dir, arguments, comm, existe
         if not existed:
             error.cleanup_dir = output_dir
         raise
+
+
+def _refused_petsc_options(petsc_options, error) -> PdemfemError:
+    """PETSc refusing a -fem_* option's value (an unknown solver or preconditioner type) raises on every rank
+    while the solids are set up: the option is the user's, so it is named, not traced back."""
+    given = " ".join(name + (f" {value}" if value is not None else "") for name, value in petsc_options)
+    # PETSc's message ends with its reason ("[0] Unable to find requested KSP type nonsense").
+    reason = re.sub(r"^\[\d+\]\s*", "", str(error).strip().splitlines()[-1]).rstrip(")")
+    return PdemfemError(f"PETSc options {given}", f"PETSc refused them: {reason}",
+                        "check each option's name and value (docs/fem.md, 'Solver options' under 'Python API'), "
+                        "e.g. -fem_ksp_type cg, -fem_pc_type gamg")
 
 
 # --------------------------------------------------------------------------- check

@@ -78,6 +78,20 @@ def test_misspelt_fem_option_is_reported(tmp_path):
     assert "name:-fem_ksp_rtol " not in report  # the correctly spelt option was used
 
 
+@pytest.mark.mpi
+def test_a_wrong_fem_option_value_is_named_once_with_exit_2(tmp_path):
+    """PETSc refuses an unknown preconditioner type on every rank while the solid is set up: one message naming
+    the option and PETSc's reason, no traceback, no output directory left behind."""
+    (tmp_path / "clamped.yaml").write_text(CLAMPED)
+    completed = run_processes(["-m", "pdemfem.cli", "run", "clamped.yaml", "--quiet", "-fem_pc_type", "nonsense"],
+                              2, tmp_path)
+    assert completed.returncode == 2, completed.stderr
+    assert completed.stderr.count("error:") == 1 and "Traceback" not in completed.stderr, completed.stderr
+    assert ("PETSc options -fem_pc_type nonsense: PETSc refused them: Unable to find requested PC type nonsense"
+            in completed.stderr), completed.stderr
+    assert not (tmp_path / "results").exists()
+
+
 API_ONE_RANK_FAILS = textwrap.dedent(
     """
     import sys
