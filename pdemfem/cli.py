@@ -526,7 +526,8 @@ def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tup
                              f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact; "
                              f"want >= {derived.required_steps_per_contact(scene):.0f})")
         memory = derived.memory_estimate_bytes(scene)
-        lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({derived.BYTES_PER_PARTICLE} B/particle, "
+        per_particle = derived.bytes_per_particle(derived.contact_history_columns(scene))
+        lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({per_particle} B/particle, "
                      f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
         lines.append(f"work: {total * steps:.3g} particle-steps")
         thermal = derived.thermal_step_limit(scene)

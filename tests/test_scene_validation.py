@@ -359,8 +359,9 @@ def test_counts_and_memory_estimate():
     scene, _ = load_scene(modified(two_groups))
     assert derived.group_counts(scene) == [100, 2]
     assert derived.particle_count(scene) == 102
-    assert derived.memory_estimate_bytes(scene) == 102 * derived.BYTES_PER_PARTICLE
-    assert 400 <= derived.BYTES_PER_PARTICLE <= 1000  # target: <= 1 KB per particle
+    # Friction (the default): 7 history columns per list entry, 1.4 x (136 + 8 x (12 + 56) + 8) = 963 B.
+    assert derived.contact_history_columns(scene) == 7
+    assert derived.memory_estimate_bytes(scene) == 102 * derived.bytes_per_particle(7) == 102 * 960
 
 
 def test_warnings_flag_a_coarse_step():

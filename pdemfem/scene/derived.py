@@ -41,7 +41,7 @@ __all__ = [
     "particle_count",
     "group_counts",
     "memory_estimate_bytes",
-    "BYTES_PER_PARTICLE",
+    "bytes_per_particle",
     "warnings",
     "DT_PER_CONTACT",
     "MAX_STEP_TRAVEL",
@@ -693,29 +693,40 @@ def contact_duration(scene: Scene, speed: float) -> ContactDurations:
 # Per particle, in bytes (see memory_estimate_bytes):
 _STATE_BYTES = 14 * 8 + 3 * 8  # x, v, w, f (3 each), radius, mass: 14 float64; id, material, cell: 3 x 8
 _NEIGHBOURS = 8  # half Verlet list entries per particle in a dense packing (12 contacts / 2 + skin)
-_LIST_ENTRY_BYTES = 4 + 8 + 3 * 8  # int32 partner index, int64 partner id, 3 float64 tangential history
+_LIST_KEY_BYTES = 4 + 8  # int32 partner index, int64 partner id; then 8 bytes per contact history column
 _LIST_OFFSET_BYTES = 8  # CSR row offset
 _OVERHEAD = 1.4  # ghosts, the history remap buffer at rebuild, sort scratch
-BYTES_PER_PARTICLE = int(
-    round(_OVERHEAD * (_STATE_BYTES + _NEIGHBOURS * _LIST_ENTRY_BYTES + _LIST_OFFSET_BYTES), -1)
-)  # 600
+
+
+def bytes_per_particle(history_columns: int) -> int:
+    """Estimated bytes per particle with `history_columns` float64 of contact history per list entry (7 with
+    friction: the tangential spring, the force it applied and the springs' energy; 0 frictionless; up to 14
+    with rolling and jkr): 963 B with friction, 571 B without, to the nearest 10."""
+    entry = _LIST_KEY_BYTES + 8 * history_columns
+    return int(round(_OVERHEAD * (_STATE_BYTES + _NEIGHBOURS * entry + _LIST_OFFSET_BYTES), -1))
+
+
+def contact_history_columns(scene: Scene) -> int:
+    """Float64 columns of contact history per list entry that the scene's contact laws keep."""
+    from pdemfem.contact.tables import build_contact_tables
+
+    return build_contact_tables(scene, characteristic_speed=expected_impact_speed(scene)).history_width
 
 
 def memory_estimate_bytes(scene: Scene) -> int:
     """Estimated particle memory [bytes], summed over ranks.
 
-    bytes = N * 1.4 * (14 * 8 + 3 * 8 + 8 * (4 + 8 + 3 * 8) + 8) ~= N * 600:
-    state arrays of 14 float64 (position, velocity, angular velocity, force,
+    bytes = N * 1.4 * (14 * 8 + 3 * 8 + 8 * (4 + 8 + 8 c) + 8), c the contact history columns
+    (`bytes_per_particle`): state arrays of 14 float64 (position, velocity, angular velocity, force,
     radius, mass... ) and 3 integers (8 bytes each) per particle, a half Verlet
-    list of ~8 entries per particle (int32 partner index, int64 partner id, three
-    float64 tangential-history components), its CSR offsets, and 40 % for ghosts,
-    the history remap at list rebuild and sort scratch.  Excludes the fixed cost of
-    the interpreter, numba and PETSc (~150-250 MB per rank) and any FEM mesh.  N counts spheres: a
-    clump's member spheres each (their bodies' arrays are small beside them).
+    list of ~8 entries per particle (int32 partner index, int64 partner id, c float64 of contact
+    history), its CSR offsets, and 40 % for ghosts, the history remap at list rebuild and sort scratch.
+    Excludes the fixed cost of the interpreter, numba and PETSc (~150-250 MB per rank) and any FEM mesh.
+    N counts spheres: a clump's member spheres each (their bodies' arrays are small beside them).
     """
     spheres = sum(count * (len(clump_group_template(group, None).member_radii) if group.clump is not None else 1)
                   for group, count in zip(scene.particles, group_counts(scene)))
-    return spheres * BYTES_PER_PARTICLE
+    return spheres * bytes_per_particle(contact_history_columns(scene))
 
 
 # --------------------------------------------------------------------------- warnings
