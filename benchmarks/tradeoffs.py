@@ -23,7 +23,7 @@ Each knob a user turns to trade accuracy for speed gets one small experiment wit
   ranks              the granular bed on 1 and 2 MPI ranks: positions against 1 rank (round-off), cost per step
 
     python benchmarks/tradeoffs.py            # everything (~8 min on 2 shared cores)
-    python benchmarks/tradeoffs.py --quick    # fewer cases and steps (~1-2 min); what tests/test_tradeoffs_quick.py runs
+    python benchmarks/tradeoffs.py --quick    # fewer cases and steps; what tests/test_tradeoffs_quick.py runs
     python benchmarks/tradeoffs.py --only steps_per_contact fem_every --no-plots
 
 Prints a table per knob, writes benchmarks/results/tradeoffs.json (or --json) and, unless --no-plots, the
@@ -914,7 +914,7 @@ def run(settings: dict, only, log=print) -> dict:
 
 def parse_arguments(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--quick", action="store_true", help="fewer cases and steps (~1-2 min)")
+    parser.add_argument("--quick", action="store_true", help="fewer cases and steps")
     parser.add_argument("--only", nargs="+", choices=KNOBS, help="run these knobs only")
     parser.add_argument("--json", type=Path, default=DEFAULT_JSON)
     parser.add_argument("--plots", type=Path, default=DEFAULT_PLOTS, help="folder for tradeoffs_*.png")
