@@ -72,7 +72,7 @@ def test_check_prints_derived_quantities(capsys):
     code, out, err = run_main(capsys, "check", DEMO)
     assert code == 0, err
     for expected in ("particles: 2000", "walls: 5", "time step: dt = 7.71e-06 s", "Rayleigh time 0.00011 s",
-                     "contact duration at 0.63 m/s", "steps per contact", "memory: ~1.2 MB",
+                     "contact duration at 0.63 m/s", "steps per contact", "memory: ~1.92 MB",
                      "warnings: none", "scene OK"):
         assert expected in out, out
     assert err == ""

@@ -189,8 +189,18 @@ def test_cli_scene_change_needs_force_and_errors_exit_2(serial_run, tmp_path):
     completed = subprocess.run(command, env=process_environment(), capture_output=True, text=True, cwd=tmp_path)
     assert completed.returncode == 2, completed.stderr
     assert "scene hash" in completed.stderr and "--force" in completed.stderr and "Traceback" not in completed.stderr
-    completed = subprocess.run(command + ["--force", "-fem_mass_ksp_rtol", "1e-9"], env=process_environment(),
-                               capture_output=True, text=True, cwd=tmp_path)
+    forced = command + ["--force", "-fem_mass_ksp_rtol", "1e-9"]
+    completed = subprocess.run(forced, env=process_environment(), capture_output=True, text=True, cwd=tmp_path)
+    # The uninterrupted run's later checkpoints are another physics': the branch would replace them.
+    assert completed.returncode == 2, completed.stderr
+    assert "holds checkpoints of later steps than the restart's" in completed.stderr, completed.stderr
+    later = sorted(path for path in (tmp_path / "out" / "checkpoints").glob("checkpoint_*.h5")
+                   if int(path.stem.split("_")[1]) > 100)
+    assert later and checkpoint(tmp_path / "out", STEPS) in later
+    (tmp_path / "kept").mkdir()
+    for path in later:
+        path.rename(tmp_path / "kept" / path.name)
+    completed = subprocess.run(forced, env=process_environment(), capture_output=True, text=True, cwd=tmp_path)
     assert completed.returncode == 0, completed.stderr
     assert checkpoint(tmp_path / "out", STEPS + EVERY).exists()
 

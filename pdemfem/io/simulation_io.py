@@ -293,7 +293,6 @@ class SimulationIO:
                 f"set time.dt: {stored!r} in the scene (the checkpoint's step, exactly; with --force, since time.dt "
                 f"is physics), or start afresh without --restart")
         self._refuse_other_particles(where, attributes, force)
-        self._refuse_moved_walls(where, attributes)
         self._refuse_replacing_other_physics(step)
         if sorted(attributes.get("solids", [])) != sorted(sim.solids):
             raise CheckpointError(where, f"holds solids {attributes.get('solids')}, the scene has {list(sim.solids)}",
@@ -305,6 +304,7 @@ class SimulationIO:
         missing = [name for name in components if name not in state]
         if missing:
             raise CheckpointError(where, f"lacks the state of {', '.join(missing)} (in this scene)", fix)
+        self._refuse_moved_walls(where, attributes)
         for name, component in components.items():
             try:
                 component.load_state_dict(state[name])
@@ -403,6 +403,10 @@ class SimulationIO:
         taken_from_scene = (".material:", ".temperature:", ".transport_velocity")
         changed = [text for text in self._changes(attributes)
                    if text.startswith("walls") and not any(key in text for key in taken_from_scene)]
+        stored_walls = (attributes.get("scene_physics") or {}).get("walls")
+        if isinstance(stored_walls, list) and len(stored_walls) != len(self.sim.scene.walls):
+            names = [wall.get("name") if isinstance(wall, dict) else "?" for wall in stored_walls]
+            changed = [f"walls {names} -> {[wall.name for wall in self.sim.scene.walls]}"]
         if changed:
             raise CheckpointError(
                 where, f"was written with other walls ({'; '.join(changed[:4])}"
