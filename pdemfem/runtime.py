@@ -83,6 +83,10 @@ def process_environment(base: dict | None = None) -> dict:
     # Containers often forbid cross-memory attach; without this Open MPI prints
     # errors on every large shared-memory message.
     environment.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
+    # hwloc's GL component (Debian's libhwloc-plugins) connects every MPI process to the X displays :0, :1, ...
+    # to look for GPUs; when such a server goes away (a virtual one `pdemfem render` started for ParaView),
+    # Xlib ends the process: "X connection to :0 broken", exit 1 mid-run.  Its topology needs no GPUs.
+    environment.setdefault("HWLOC_COMPONENTS", "-gl")
     # Debian's h5py picks its MPI build only under mpiexec; use it always so a
     # one-process run writes through the same (collective) code path.
     environment.setdefault("H5PY_ALWAYS_USE_MPI", "1")

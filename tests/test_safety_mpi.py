@@ -3,6 +3,8 @@ mixes its messages with the user's, a fully clamped solid runs on several ranks,
 options are reported.  Each case runs real processes (mpiexec)."""
 from __future__ import annotations
 
+import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -90,6 +92,35 @@ def test_a_wrong_fem_option_value_is_named_once_with_exit_2(tmp_path):
     assert ("PETSc options -fem_pc_type nonsense: PETSc refused them: Unable to find requested PC type nonsense"
             in completed.stderr), completed.stderr
     assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.mpi
+@pytest.mark.skipif(shutil.which("Xvfb") is None, reason="needs Xvfb (Debian package xvfb)")
+def test_mpi_processes_leave_the_x_displays_alone(tmp_path):
+    """hwloc's GL component (Debian's libhwloc-plugins) connects mpiexec and each MPI process to the X displays
+    :0-:9 to look for GPUs; a virtual display `pdemfem render` started for ParaView going away during that probe
+    ended the ranks of an MPI run beside it ("X connection to :0 broken", exit 1).  pdemfem's environment
+    leaves the component out: an X server (logging its clients) sees no connection from a 2-rank job.  Measured
+    without it: 4 connections (2 per process probing)."""
+    import select
+
+    read_end, write_end = os.pipe()
+    server = subprocess.Popen(["Xvfb", "-displayfd", str(write_end), "-screen", "0", "64x64x24", "-nolisten", "tcp",
+                               "-audit", "4"], pass_fds=(write_end,), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              text=True)
+    os.close(write_end)
+    try:
+        with os.fdopen(read_end) as pipe:
+            assert select.select([pipe], [], [], 30)[0], "Xvfb did not start"
+            number = int(pipe.readline())
+        completed = run_processes(["-c", "from mpi4py import MPI; MPI.COMM_WORLD.Barrier()"], 2, tmp_path)
+        assert completed.returncode == 0, completed.stderr
+    finally:
+        server.terminate()
+        log = server.communicate(timeout=30)[1]
+    if number > 9:
+        pytest.skip(f"Xvfb took display :{number}, beyond the :0-:9 hwloc probes")
+    assert "connected" not in log, log
 
 
 API_ONE_RANK_FAILS = textwrap.dedent(
