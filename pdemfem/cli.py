@@ -525,8 +525,8 @@ def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tup
                 lines.append(f"contact duration at {speed:.3g} m/s: {', '.join(parts)}; "
                              f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact; "
                              f"want >= {derived.required_steps_per_contact(scene):.0f})")
-        memory = derived.memory_estimate_bytes(scene)
         per_particle = derived.bytes_per_particle(derived.contact_history_columns(scene))
+        memory = derived.sphere_count(scene) * per_particle  # derived.memory_estimate_bytes
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({per_particle} B/particle, "
                      f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
         lines.append(f"work: {total * steps:.3g} particle-steps")

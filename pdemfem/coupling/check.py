@@ -70,7 +70,7 @@ def coupling_report(scene, base_dir, dt: float, comm=None, warnings=None, solids
     for index, config in enumerate(scene.solids):
         solid = solids[config.name]
         critical = solid.critical_time_step()
-        substeps = max(1, math.ceil(interval / critical * (1.0 - 1e-12)))
+        substeps = solid.substeps(interval)
         lines.append(f"solid {config.name}: {3 * solid.n_global_nodes} DOF ({config.element}, {config.mass} mass), "
                      f"FE critical step {critical:.3g} s = {critical / dt:.3g} x DEM dt -> {substeps} FE sub-step(s) "
                      f"of {interval / substeps:.3g} s per advance; contact groups {list(config.contact)}")
@@ -199,8 +199,7 @@ def coupling_assessment(scene, solids: dict, dt: float) -> tuple:
     interval = scene.coupling.fem_every * dt
     for index, config in enumerate(scene.solids):
         solid = solids[config.name]
-        found.extend(_damping_cost(index, config, solid,
-                                   max(1, math.ceil(interval / solid.critical_time_step() * (1.0 - 1e-12)))))
+        found.extend(_damping_cost(index, config, solid, solid.substeps(interval)))
         if config.contact and scene.particles:
             _contact_figures(scene, config, solid, interval, found, limits, point_loaded)
     return found, min(limits.values(), default=math.inf), point_loaded

@@ -447,12 +447,16 @@ class Solid(kinds.StateComponent):
         self._damped_nodes = self._damped_nodes[:0]
         self._advance_heat(dt)
 
+    def substeps(self, interval: float) -> int:
+        """Collective: the fewest equal stable steps that cover `interval` (what `advance` takes)."""
+        return max(1, math.ceil(interval / self.critical_time_step() * (1.0 - 1e-12)))
+
     def advance(self, interval: float) -> int:
         """Collective: cover `interval` with the fewest equal stable steps (sub-cycling); returns their number.
 
         Nodal forces added before the call act, constant, over the whole interval (impulse-preserving).
         """
-        substeps = max(1, math.ceil(interval / self.critical_time_step() * (1.0 - 1e-12)))
+        substeps = self.substeps(interval)
         dt = interval / substeps
         self.nodal_force_vec.assemble()
         self._gather_dampers()

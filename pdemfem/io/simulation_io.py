@@ -292,7 +292,8 @@ class SimulationIO:
                        f"part of the stored state (step counts, velocities at half steps), so a restart keeps it",
                 f"set time.dt: {stored!r} in the scene (the checkpoint's step, exactly; with --force, since time.dt "
                 f"is physics), or start afresh without --restart")
-        self._refuse_other_particles(where, attributes, force)
+        changes = self._changes(attributes)
+        self._refuse_other_particles(where, attributes, changes, force)
         self._refuse_replacing_other_physics(step)
         if sorted(attributes.get("solids", [])) != sorted(sim.solids):
             raise CheckpointError(where, f"holds solids {attributes.get('solids')}, the scene has {list(sim.solids)}",
@@ -304,7 +305,7 @@ class SimulationIO:
         missing = [name for name in components if name not in state]
         if missing:
             raise CheckpointError(where, f"lacks the state of {', '.join(missing)} (in this scene)", fix)
-        self._refuse_moved_walls(where, attributes)
+        self._refuse_moved_walls(where, attributes, changes)
         for name, component in components.items():
             try:
                 component.load_state_dict(state[name])
@@ -318,18 +319,12 @@ class SimulationIO:
         self.last_checkpoint = (sim.step_count, checkpoint.path)
 
 
-    def _refuse_other_particles(self, where: str, attributes: dict, force: bool) -> None:
+    def _refuse_other_particles(self, where: str, attributes: dict, all_changes: list, force: bool) -> None:
         """A restart continues the checkpoint's particles as stored: a scene that inserts another number of
         particles at t = 0 is refused even with --force (the stored state's shape changed, docs/output.md);
         other changes of the insertion (region, seed, radii with the same count) are warned to have no effect."""
         sim = self.sim
-        stored_physics = attributes.get("scene_physics")
-        changes = []
-        if isinstance(stored_physics, dict):
-            from pdemfem.scene.loader import physics_changes
-
-            changes = [text for text in physics_changes(stored_physics, scene_physics(sim.scene), limit=1000)
-                       if text.startswith("particles")]
+        changes = [text for text in all_changes if text.startswith("particles")]
         inserted = (attributes.get("insertion") or {}).get("inserted")
         if inserted is not None and int(inserted) != int(sim.inserted_count):
             listed = "; ".join(changes[:6]) if changes else "the particle groups"
@@ -343,7 +338,7 @@ class SimulationIO:
                              or ".clump" in text or ".initial_temperature" in text]
         # The particles' masses and inertia are stored with them: a density change reaches the solids only.
         particle_materials = {group.material for group in sim.scene.particles}
-        insertion_changes += [text for text in self._changes(attributes)
+        insertion_changes += [text for text in all_changes
                               if any(text.startswith(f"materials.{name}.density:") for name in particle_materials)]
         if force and insertion_changes and self.comm.rank == 0:
             log.warning("restart: the checkpoint's particles are continued as stored (positions, velocities, radii, "
@@ -396,12 +391,12 @@ class SimulationIO:
 
         return physics_changes(stored_physics, scene_physics(self.sim.scene), limit=1000)
 
-    def _refuse_moved_walls(self, where: str, attributes: dict) -> None:
+    def _refuse_moved_walls(self, where: str, attributes: dict, changes: list) -> None:
         """The walls' positions and motion are stored state (a moving wall's point is where its motion took it),
         restored by each wall's place in the list: a scene whose walls were moved, turned, reordered, added or
         removed is refused even with --force.  Their materials, temperatures and belt speeds come from the scene."""
         taken_from_scene = (".material:", ".temperature:", ".transport_velocity")
-        changed = [text for text in self._changes(attributes)
+        changed = [text for text in changes
                    if text.startswith("walls") and not any(key in text for key in taken_from_scene)]
         stored_walls = (attributes.get("scene_physics") or {}).get("walls")
         if isinstance(stored_walls, list) and len(stored_walls) != len(self.sim.scene.walls):

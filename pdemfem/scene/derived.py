@@ -42,6 +42,7 @@ __all__ = [
     "group_counts",
     "memory_estimate_bytes",
     "bytes_per_particle",
+    "sphere_count",
     "warnings",
     "DT_PER_CONTACT",
     "MAX_STEP_TRAVEL",
@@ -724,9 +725,13 @@ def memory_estimate_bytes(scene: Scene) -> int:
     Excludes the fixed cost of the interpreter, numba and PETSc (~150-250 MB per rank) and any FEM mesh.
     N counts spheres: a clump's member spheres each (their bodies' arrays are small beside them).
     """
-    spheres = sum(count * (len(clump_group_template(group, None).member_radii) if group.clump is not None else 1)
-                  for group, count in zip(scene.particles, group_counts(scene)))
-    return spheres * bytes_per_particle(contact_history_columns(scene))
+    return sphere_count(scene) * bytes_per_particle(contact_history_columns(scene))
+
+
+def sphere_count(scene: Scene) -> int:
+    """Spheres inserted at t = 0: each particle, and each member sphere of a clump."""
+    return sum(count * (len(clump_group_template(group, None).member_radii) if group.clump is not None else 1)
+               for group, count in zip(scene.particles, group_counts(scene)))
 
 
 # --------------------------------------------------------------------------- warnings
