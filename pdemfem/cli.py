@@ -508,7 +508,8 @@ def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tup
         lines.append(f"time step: dt = {dt:.3g} s (given{rayleigh_text})")
     steps = math.ceil(scene.time.end / dt - 1e-9)  # the count `run` takes (Simulation.run)
     lines.append(f"steps: {steps} to time.end = {scene.time.end:g} s")
-    if total:
+    streams = any(group.insert.kind == "stream" for group in scene.particles)
+    if total or streams:
         speed, how = derived.impact_speed_estimate(scene)
         lines.append(f"impact speed: {speed:.3g} m/s ({how})")
         if 0.0 < speed < float("inf"):  # an overflowing initial velocity is a warning (derived.warnings)
@@ -529,7 +530,8 @@ def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tup
         memory = derived.sphere_count(scene) * per_particle  # derived.memory_estimate_bytes
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({per_particle} B/particle, "
                      f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
-        lines.append(f"work: {total * steps:.3g} particle-steps")
+        lines.append(f"work: {total * steps:.3g} particle-steps" + (" for the particles placed at the start (the "
+                                                                   "streams' add to it)" if streams else ""))
         thermal = derived.thermal_step_limit(scene)
         if scene.heat_enabled:
             lines.append("heat: on (contact conduction" + (", solids conduct" if scene.solids else "") + ")" + (

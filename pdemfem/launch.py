@@ -5,6 +5,7 @@
 """
 from __future__ import annotations
 
+import argparse
 import os
 import shutil
 import sys
@@ -12,21 +13,32 @@ import sys
 from pdemfem.runtime import mpiexec_command, process_environment
 
 
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m pdemfem.launch",
+        description="Run a command with pdemfem's process environment (PETSc, Open MPI as root and "
+                    "oversubscription, one thread per rank), under mpiexec when RANKS > 1.",
+        epilog="example: python -m pdemfem.launch -n 2 -- pdemfem run scene.yaml")
+    parser.add_argument("-n", "--ranks", type=int, default=1, metavar="RANKS", help="MPI ranks (default 1)")
+    parser.add_argument("--print-env", action="store_true",
+                        help="print the environment as export lines (for a job script) and exit")
+    parser.add_argument("command", nargs=argparse.REMAINDER, help="the command and its arguments, after --")
+    return parser
+
+
 def main(argv: list[str] | None = None) -> int:
-    arguments = list(sys.argv[1:] if argv is None else argv)
-    if arguments[:1] == ["--print-env"]:
+    parser = _parser()
+    options = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    if options.print_env:
         for key, value in sorted(process_environment({}).items()):
             print(f"export {key}={value}")
         return 0
-    ranks = 1
-    if arguments[:1] == ["-n"]:
-        ranks = int(arguments[1])
-        arguments = arguments[2:]
-    if arguments[:1] == ["--"]:
-        arguments = arguments[1:]
+    ranks = options.ranks
+    arguments = options.command[1:] if options.command[:1] == ["--"] else options.command
+    if ranks < 1:
+        parser.error(f"-n {ranks}: give at least 1 rank")
     if not arguments:
-        print("usage: python -m pdemfem.launch [-n RANKS] -- COMMAND ...", file=sys.stderr)
-        return 2
+        parser.error("no command: give it after --, e.g. -- pdemfem run scene.yaml")
     executable = _resolve(arguments[0])
     if executable is None:
         # mpiexec would fail on every rank with its own report silenced (orte_execute_quiet): say it here.

@@ -132,9 +132,13 @@ def plot_history(outdir) -> List[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
+    from pdemfem.render import _prefer_the_toolkit_beside
+
     with warnings.catch_warnings():
-        # Debian's matplotlib beside pip's warns that its 3-D axes cannot load; no 3-D plots here.
+        # Debian's matplotlib beside pip's warns that its 3-D axes cannot load; no 3-D plots here, but `render` in
+        # the same process needs them: the toolkit beside this matplotlib is put first before pyplot registers it.
         warnings.simplefilter("ignore", UserWarning)
+        _prefer_the_toolkit_beside(matplotlib)
         from matplotlib import pyplot
 
     plots = outdir / "plots"

@@ -184,12 +184,18 @@ def _pyplot():
         _prefer_the_toolkit_beside(matplotlib)  # before pyplot, whose projections register mplot3d's '3d'
         from matplotlib import pyplot
         try:
+            from mpl_toolkits.mplot3d import Axes3D
             from mpl_toolkits.mplot3d.art3d import Poly3DCollection
         except ImportError as error:
             raise PdemfemError("matplotlib's 3-D toolkit (mpl_toolkits.mplot3d)", f"does not import: {error}",
                                f"two matplotlib installations are mixed (this one: {matplotlib.__file__}); "
                                "keep one: remove the system's (apt-get remove python3-matplotlib) or this "
                                "environment's (pip uninstall matplotlib), or draw with --renderer paraview") from None
+        from matplotlib import projections
+        if "3d" not in projections.get_projection_names():
+            # pyplot was imported before (by `plot`, in the same process) when the system's toolkit still came
+            # first: its registration of '3d' failed then, with a warning only.
+            projections.register_projection(Axes3D)
     return pyplot, Poly3DCollection
 
 

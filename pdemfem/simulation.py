@@ -34,7 +34,7 @@ from pdemfem.particles.system import ParticleSystem
 from pdemfem.scene import derived
 from pdemfem.scene.inputs import (solid_errors_named, start_solids, start_surfaces, validate_geometry,
                                    validate_scene_coordinates)
-from pdemfem.scene.loader import load_scene, output_directory, resolve_path
+from pdemfem.scene.loader import input_file_digests, load_scene, output_directory, resolve_path
 from pdemfem.walls.factory import build_contributor_walls
 from pdemfem.walls.plane import PlaneWalls
 
@@ -56,6 +56,9 @@ class Simulation:
         self.scene = scene
         self.base_dir = Path(base_dir)
         self.output_dir = output_directory(scene, self.base_dir, output_dir)
+        # What the files the scene names held when the run read them (checkpoints keep it: a restart from an
+        # edited mesh is refused).  Read on one rank: every rank then agrees on the refusal.
+        self.input_digests = self.comm.bcast(input_file_digests(scene, self.base_dir) if self.comm.rank == 0 else None)
         self.solids = self._build_solids()
         # dt "auto" without particles takes the solids' FE critical step (collective).
         solid_step = (min(solid.critical_time_step() for solid in self.solids.values())

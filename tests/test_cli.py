@@ -264,6 +264,20 @@ def test_launcher_finds_the_environment_commands_without_activation(tmp_path):
     assert missing.returncode == 2 and "command 'no-such-command' not found" in missing.stderr
 
 
+def test_launcher_options_are_its_own(capsys):
+    """--help prints the launcher's usage; an option it does not know is named, not run as a command ('--help'
+    and '--oversubscribe' were taken for the command's name: "command '--help' not found on PATH")."""
+    from pdemfem import launch
+
+    with pytest.raises(SystemExit) as shown:
+        launch.main(["--help"])
+    assert shown.value.code == 0 and "-n RANKS" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as refused:
+        launch.main(["-n", "2", "--oversubscribe", "--", "true"])
+    err = capsys.readouterr().err
+    assert refused.value.code == 2 and "unrecognized arguments: --oversubscribe" in err and "not found" not in err
+
+
 def test_check_counts_the_steps_run_takes(tmp_path):
     """end / dt = 2.5: run takes 3 steps (the last one reaches past end), and check says 3, not 2.5."""
     from pdemfem.cli import check_report

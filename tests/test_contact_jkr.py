@@ -230,3 +230,20 @@ def test_sphere_sticks_to_mesh_and_cylinder_walls_at_the_zero_load_overlap(kind,
     sim.run(progress=False)
     overlap = RADIUS - sim.particles.positions[0, 2]
     assert overlap == pytest.approx(delta0, rel=0.01)  # the model's promise
+
+
+def test_check_of_a_jkr_scene_prints_no_numpy_warning(tmp_path, capsys):
+    """`pdemfem check` builds the contact table without the particles' radii (for its width and
+    composition): the pull-off reach of R* = 0 was 0/0, and numpy's RuntimeWarning reached the user."""
+    import warnings
+
+    import yaml
+
+    from pdemfem import cli
+
+    path = tmp_path / "jkr.yaml"
+    path.write_text(yaml.safe_dump(_sphere_on_plane(RADIUS, (0.0, 0.0, -9.81), WORK)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert cli.main(["check", str(path)]) == 0
+    assert "RuntimeWarning" not in capsys.readouterr().err

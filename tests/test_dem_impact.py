@@ -282,6 +282,47 @@ def test_oblique_impact_sliding():
     assert abs(spin / (2.5 * nominal / radius) - 1.0) < allowed + lever_error
 
 
+def _tangential_rebound(model, angle_degrees):
+    """(v_t' / v_t, steps in contact) of a 1 m/s impact at `angle_degrees` from the normal on a plane: an
+    aluminium-like sphere (R 5 mm, E 70 GPa, nu 0.3) with e 0.5 and mu 0.3, ~390 steps per contact."""
+    angle = math.radians(angle_degrees)
+    material = {"density": 2700.0, "youngs_modulus": 7.0e10, "poisson_ratio": 0.3}
+    dt = 1.0e-7
+    scene = single_sphere_on_floor(radius=5e-3, material=material, velocity=(math.sin(angle), 0.0, -math.cos(angle)),
+                                   height=5e-3 + 2e-6, dt=dt, model=model, restitution=0.5, friction=0.3,
+                                   expected_impact_speed=1.0)
+    sim = Simulation.from_dict(scene)
+    touching = 0
+    for _ in range(1200):
+        sim.step(1)
+        touching += sim.contact_count()
+    assert sim.contact_count() == 0 and touching > 0
+    return sim.particles.velocities[0, 0] / math.sin(angle), touching
+
+
+@pytest.mark.parametrize("model, stiffness_ratio", [("linear_spring_dashpot", 2.0 / 7.0),
+                                                    ("hertz_mindlin", 2.0 * (1.0 - 0.3) / (2.0 - 0.3))])
+def test_tangential_rebound_is_continuous_where_the_dashpot_first_exceeds_the_coulomb_limit(model, stiffness_ratio):
+    """At first touch the spring is unloaded, so both forces are the dashpots': the tangential one exceeds
+    mu F_n from the first step on where tan(theta) > mu sqrt(S_n / S_t) (S_t / S_n: 2/7 for the linear
+    model, 4 G*/E* = 2 (1 - nu) / (2 - nu) for Hertz-Mindlin).  The rebound must not jump there: a cap
+    that stored the dashpot's part of the capped force in the spring gave it back as recoil, and the
+    tangential rebound fell from 0.627 to 0.505 between 29.0 and 29.6 degrees (linear)."""
+    threshold = math.degrees(math.atan(0.3 / math.sqrt(stiffness_ratio)))
+    step = 0.3  # degrees
+    rebounds = {}
+    contact_steps = []
+    for offset in (-3, -1, 1, 3):
+        rebounds[offset], touching = _tangential_rebound(model, threshold + offset * step)
+        contact_steps.append(touching)
+    across = abs(rebounds[1] - rebounds[-1])
+    beside = max(abs(rebounds[-1] - rebounds[-3]), abs(rebounds[3] - rebounds[1]))
+    # A continuous response changes across the threshold about as much as over the same width beside it; the
+    # time discretisation may move the start of slip by one step: at most 1/N of the tangential impulse
+    # (< v_t), N the steps per contact.
+    assert across < beside + 1.0 / min(contact_steps), (rebounds, min(contact_steps))
+
+
 def _sticking_reference(m, radius, e_eff, g_eff, v_n, v_t, samples=20000):
     """No-slip elastic impact with the Mindlin spring F_t = -S_t(delta) xi, S_t = 8 G* sqrt(R delta),
     acting on the contact point's tangential motion (effective mass m I/(I + m R^2) = 2/7 m):

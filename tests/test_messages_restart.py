@@ -197,3 +197,46 @@ def test_another_contact_surface_is_refused_even_with_force(tmp_path, capsys):
     assert err.count("error:") == 1 and "Traceback" not in err
     # 3 x 3 nodes on top; the 3 x 2 of the xmin side share its edge of 3: 12.
     assert "solid 'block': its contact surface has 9 nodes in the checkpoint, 12 in this scene" in err, err
+
+
+def _write_plate_files(folder, shift=0.0, wall_shift=0.0):
+    """block.vtu: the box [0, 0.04]^2 x [-0.01, 0] in six tetrahedra (x moved by `shift`); floor.stl: a square
+    0.01 m below it (z moved by `wall_shift`)."""
+    import meshio
+    import numpy as np
+
+    corners = np.array([[i, j, k] for k in (0, 1) for j in (0, 1) for i in (0, 1)], dtype=float)
+    points = corners * [0.04, 0.04, 0.01] + [shift, 0.0, -0.01]
+    tets = []
+    for tet in ([0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]):
+        edges = points[tet[1:]] - points[tet[0]]
+        tets.append(tet if np.linalg.det(edges) > 0 else [tet[0], tet[2], tet[1], tet[3]])
+    meshio.write(folder / "block.vtu", meshio.Mesh(points, [("tetra", tets)]))
+    square = np.array([[-0.1, -0.1, 0], [0.1, -0.1, 0], [0.1, 0.1, 0], [-0.1, 0.1, 0]]) + [0, 0, -0.02 + wall_shift]
+    meshio.write(folder / "floor.stl", meshio.Mesh(square, [("triangle", [[0, 1, 2], [0, 2, 3]])]))
+
+
+def test_an_edited_mesh_file_is_refused_on_restart(tmp_path, capsys):
+    """The scene hash covers the scene's text, not what its files hold: an edited solid mesh was continued
+    without --force (and diverged, the message blaming dt), an edited mesh wall's new geometry silently ignored
+    (its vertices come from the checkpoint).  Now a changed file is refused like a changed key; a mesh wall's
+    even with --force."""
+    scene = PLATE.replace("mesh: {box: [[0, 0, -0.01], [0.04, 0.04, 0]], cells: [2, 2, 1]}", "mesh: block.vtu")
+    scene += "walls:\n  - {name: below, kind: mesh, file: floor.stl, material: alu}\n"
+    (tmp_path / "plate.yaml").write_text(scene)
+    _write_plate_files(tmp_path)
+    assert cli.main(["run", str(tmp_path / "plate.yaml"), "--quiet"]) == 0
+    checkpoint = sorted((tmp_path / "results" / "checkpoints").glob("checkpoint_*.h5"))[0]
+    longer = tmp_path / "longer.yaml"
+    longer.write_text(scene.replace("end: 0.002", "end: 0.003"))
+    _write_plate_files(tmp_path, shift=1e-4)
+    code, _, err = run(capsys, "run", longer, "-o", tmp_path / "a", "--quiet", "--restart", checkpoint)
+    assert code == 2 and "solids[0].mesh (block.vtu)" in err and "changed since" in err and "--force" in err, err
+    code, _, err = run(capsys, "run", longer, "-o", tmp_path / "b", "--quiet", "--restart", checkpoint, "--force")
+    assert code == 0, err
+    _write_plate_files(tmp_path, wall_shift=1e-3)
+    code, _, err = run(capsys, "run", longer, "-o", tmp_path / "c", "--quiet", "--restart", checkpoint, "--force")
+    assert code == 2 and "walls[0].file (floor.stl)" in err and "even with --force" in err, err
+    _write_plate_files(tmp_path)  # the files as the checkpoint's run read them: accepted without --force
+    code, _, err = run(capsys, "run", longer, "-o", tmp_path / "d", "--quiet", "--restart", checkpoint)
+    assert code == 0, err

@@ -176,3 +176,20 @@ def test_gallery_page_names_the_renderer():
     """The committed pictures may come from either renderer: the page says which drew them."""
     page = GALLERY_PAGE.read_text()
     assert "These pictures were drawn by ParaView " in page or "These pictures were drawn by matplotlib " in page
+
+
+def test_render_after_plot_in_one_process_draws_in_3d():
+    """`plot` imported pyplot first; where a system matplotlib's toolkit shadowed this one's (Debian's
+    python3-matplotlib beside the environment's), pyplot's registration of the '3d' projection failed (a
+    warning only) and a later `render` in the same process raised "Unknown projection '3d'".  A fresh process
+    imports pyplot the plain way first, then asks render for its axes."""
+    import subprocess
+
+    program = ("import warnings; warnings.simplefilter('ignore')\n"
+               "import matplotlib; matplotlib.use('Agg')\n"
+               "from matplotlib import pyplot\n"
+               "from pdemfem.render import _pyplot\n"
+               "pyplot, _ = _pyplot()\n"
+               "print(pyplot.figure().add_subplot(projection='3d').name)\n")
+    ran = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120)
+    assert ran.returncode == 0 and ran.stdout.strip() == "3d", ran.stderr[-2000:]

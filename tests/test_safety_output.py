@@ -49,6 +49,20 @@ def test_second_run_into_the_same_directory_is_refused(workdir, capsys):
     assert snapshot(workdir / "results") == before
 
 
+def test_a_data_file_without_its_index_is_not_overwritten(workdir, capsys):
+    """An earlier run's particles.h5 or <solid>.h5 whose .xdmf was moved or deleted is still its results (it was
+    replaced silently, exit 0); --force deletes it like the rest."""
+    results = workdir / "results"
+    results.mkdir()
+    (results / "particles.h5").write_bytes(b"an earlier run's particles")
+    code, _, err = run_main(capsys, "run", "scene.yaml", "--quiet")
+    assert code == 2 and "holds the results of an earlier run (particles.h5)" in err, err
+    assert (results / "particles.h5").read_bytes() == b"an earlier run's particles"
+    code, _, err = run_main(capsys, "run", "scene.yaml", "--quiet", "--force")
+    assert code == 0, err
+    assert (results / "particles.h5").read_bytes() != b"an earlier run's particles"
+
+
 def test_force_starts_afresh_without_mixing(workdir, capsys):
     results = workdir / "results"
     results.mkdir()

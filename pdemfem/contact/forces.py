@@ -163,13 +163,17 @@ def pair_forces(row_particles, pair_starts, pair_ends, neighbor_partners, pair_h
                 previous_vz = uz - (qx * ey - qy * ex)
             effective_mass = mass[i] * mass[j] / (mass[i] + mass[j])
             effective_radius = radius_i * radius_j / radius_sum
-            effective_inertia = 0.0  # only rolling models use it: a division saved per contact without them
+            effective_inertia = 0.0  # only rolling models use them: divisions saved per contact without them
+            rolling_inertia = 0.0
             if composition & ROLLING_ANY:
                 effective_inertia = 1.0 / (inverse_inertia[i] + inverse_inertia[j])
+                # Each body's inertia about the contact point, I + m r^2, in series (Ai et al. 2011, eq. 27).
+                rolling_inertia = 1.0 / (1.0 / (1.0 / inverse_inertia[i] + mass[i] * radius_i * radius_i)
+                                         + 1.0 / (1.0 / inverse_inertia[j] + mass[j] * radius_j * radius_j))
             fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = contact_response(
                 composition, coefficients, material_i, material_j, nx, ny, nz, overlap, vx, vy, vz,
                 previous_vx, previous_vy, previous_vz, wxi - wxj, wyi - wyj, wzi - wzj, effective_mass,
-                effective_radius, effective_inertia, pair_history, row, dt)
+                effective_radius, effective_inertia, rolling_inertia, pair_history, row, dt)
             if booked:
                 elastic_total += elastic
                 dissipated_total += dissipated

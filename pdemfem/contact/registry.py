@@ -178,7 +178,7 @@ def _rolling_chain(models, index):
     if index == len(models):
         @njit(inline="always")
         def none_left(model, composition, coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force,
-                      normal_stiffness, effective_radius, effective_inertia, history,
+                      normal_stiffness, effective_radius, effective_inertia, rolling_inertia, history,
                       row, column, dt):
             return 0.0, 0.0, 0.0, 0.0, 0.0
         return none_left
@@ -189,15 +189,15 @@ def _rolling_chain(models, index):
 
     @njit(inline="always")
     def link(model, composition, coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness,
-             effective_radius, effective_inertia, history, row, column, dt):
+             effective_radius, effective_inertia, rolling_inertia, history, row, column, dt):
         # Code 0 (no rolling resistance) never matches: a pair without it gets no torque.
         if composition & own_bit:
             if model == code:
                 return function(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness,
-                                effective_radius, effective_inertia, history, row,
+                                effective_radius, effective_inertia, rolling_inertia, history, row,
                                 column, dt)
         return rest(model, composition, coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness,
-                    effective_radius, effective_inertia, history, row, column, dt)
+                    effective_radius, effective_inertia, rolling_inertia, history, row, column, dt)
     return link
 
 

@@ -68,7 +68,8 @@ def clear_history(composition, history, row):
 
 @njit(inline="always", cache=True)
 def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, vy, vz, previous_vx, previous_vy,
-                     previous_vz, wx, wy, wz, effective_mass, effective_radius, effective_inertia, history, row, dt):
+                     previous_vz, wx, wy, wz, effective_mass, effective_radius, effective_inertia, rolling_inertia, history, row,
+                     dt):
     """Force and rolling moment on i for one contact; updates history[row].
 
     previous_v is the contact point's relative velocity of this step as the previous evaluation's geometry
@@ -133,7 +134,7 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
     if composition & ROLLING_ANY:
         mx, my, mz, rolling_energy, rolling_dissipated = rolling_torque(
             int(coefficients[a, b, ROLLING_MODEL]), composition, coefficients, a, b, nx, ny, nz, wx, wy, wz,
-            normal_force, normal_stiffness, effective_radius, effective_inertia, history,
+            normal_force, normal_stiffness, effective_radius, effective_inertia, rolling_inertia, history,
             row, rolling_column, dt)
         spring_energy_after += rolling_energy
         dissipated += rolling_dissipated
@@ -162,9 +163,11 @@ def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz
     relative_x = vx - surface_vx - lever * (wy * nz - wz * ny)
     relative_y = vy - surface_vy - lever * (wz * nx - wx * nz)
     relative_z = vz - surface_vz - lever * (wx * ny - wy * nx)
-    effective_inertia = 0.0  # only rolling models use it
+    effective_inertia = 0.0  # only rolling models use them
+    rolling_inertia = 0.0
     if composition & ROLLING_ANY:
         effective_inertia = 1.0 / inverse_inertia
+        rolling_inertia = effective_inertia + mass * radius * radius  # about the contact point
     # The same velocity with the previous evaluation's lever, the distance a step earlier (exact for a plane
     # or a facet; on a curved surface the normal's turn over the step is left out).
     receded = dt * (relative_x * nx + relative_y * ny + relative_z * nz)
@@ -173,7 +176,8 @@ def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz
     previous_z = relative_z + receded * (wx * ny - wy * nx)
     fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = contact_response(
         composition, coefficients, material, wall_row, nx, ny, nz, radius - distance, relative_x, relative_y,
-        relative_z, previous_x, previous_y, previous_z, wx, wy, wz, mass, radius, effective_inertia, history, slot,
+        relative_z, previous_x, previous_y, previous_z, wx, wy, wz, mass, radius, effective_inertia, rolling_inertia,
+        history, slot,
         dt)
     tx = -lever * (ny * fz - nz * fy) + mx
     ty = -lever * (nz * fx - nx * fz) + my

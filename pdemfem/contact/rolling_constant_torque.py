@@ -23,7 +23,7 @@ def parameters(interaction) -> tuple:
 
 
 @njit(inline="always", cache=True)
-def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, effective_radius, effective_inertia, history, row, column, dt):
+def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, effective_radius, effective_inertia, rolling_inertia, history, row, column, dt):
     """(moment on the first body (3), spring energy (none), work taken from the relative rolling); keeps the
     moment in the history for the next evaluation's books.
 

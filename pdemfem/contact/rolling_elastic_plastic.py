@@ -5,8 +5,10 @@ resistance of LIGGGHTS): an incremental spring moment on the relative rolling ro
 
     M_k += -k_r w_r dt,   k_r = 2.25 mu_r^2 R*^2 S_n,   |M_k| <= mu_r R* F_n  (full mobilisation),
 
-plus a viscous moment M_d = -eta_r 2 sqrt(I* k_r) w_r while the spring is below the limit
-(eta_r: `rolling_damping`, 0.3 by default as Ai et al. recommend; no damping at the limit).
+plus a viscous moment M_d = -eta_r 2 sqrt(I_r k_r) w_r while the spring is below the limit
+(eta_r: `rolling_damping`, 0.3 by default as Ai et al. recommend; no damping at the limit), with I_r the
+bodies' inertias about the contact point, I + m r^2 each, in series (Ai et al. eq. 27): eta_r is then the
+fraction of critical damping of a body rocking on its contact (the body's own I gave sqrt(2/7) of it).
 Unlike the constant torque, a body on a slope flatter than mu_r comes to a true rest.
 The spring moment (on the first body) is the contact's rolling history: it turns with the
 tangent plane and is kept while the contact lasts.  Its energy |M_k|^2 / (2 k_r) is booked as
@@ -36,7 +38,7 @@ def parameters(interaction) -> tuple:
 
 
 @njit(inline="always", cache=True)
-def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, effective_radius, effective_inertia, history, row, column, dt):
+def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stiffness, effective_radius, effective_inertia, rolling_inertia, history, row, column, dt):
     mu_r = coefficients[a, b, ROLLING_FRICTION]
     lever_squared = (mu_r * effective_radius) ** 2
     stiffness = STIFFNESS_FACTOR * lever_squared * normal_stiffness
@@ -61,7 +63,7 @@ def torque(coefficients, a, b, nx, ny, nz, wx, wy, wz, normal_force, normal_stif
         my *= scale
         mz *= scale
     elif stiffness > 0.0:
-        damping = coefficients[a, b, DAMPING_RATIO] * 2.0 * math.sqrt(effective_inertia * stiffness)
+        damping = coefficients[a, b, DAMPING_RATIO] * 2.0 * math.sqrt(rolling_inertia * stiffness)
     energy = 0.5 * (mx * mx + my * my + mz * mz) / stiffness if stiffness > 0.0 else 0.0
     total_x = mx - damping * rx
     total_y = my - damping * ry

@@ -117,8 +117,10 @@ def build_contact_tables(scene, characteristic_speed: float, largest_radius: flo
                     scene.materials[name_a].conductivity, scene.materials[name_b].conductivity)
             if normal_model.COHESIVE:
                 composition |= layout.COHESIVE
+                # Without a radius (tables built for their composition or width alone) there is no reach.
                 row[layout.COHESION_REACH] = normal_model.pull_off_distance(
-                    row[layout.NORMAL_PARAMETERS:], row[layout.EFFECTIVE_MODULUS], max(largest_radius, 0.0))
+                    row[layout.NORMAL_PARAMETERS:], row[layout.EFFECTIVE_MODULUS], largest_radius) \
+                    if largest_radius > 0.0 else 0.0
             if interaction.friction > 0.0:
                 composition |= layout.TANGENTIAL
             if interaction.rolling_friction > 0.0:

@@ -120,10 +120,14 @@ def require_finite_points(source, points: np.ndarray, numbers=None) -> None:
                         fix="repair or re-export the mesh")
 
 
-def _no_volume_error(source, other_volume=()):
+def _no_volume_error(source, other_volume=(), with_tetrahedra=False):
     problem = "the mesh has no volume cells (tetrahedra)"
     if other_volume:
         problem = f"the mesh's volume cells are {sorted(other_volume)}; only tetrahedra are supported"
+    if with_tetrahedra:
+        # Dropping them would lose that part of the solid (its mass, stiffness and supports) without a word.
+        problem = (f"the mesh mixes tetrahedra with other volume cells ({', '.join(sorted(other_volume))}); only "
+                   f"tetrahedra are supported")
     if source.lower().endswith(".geo"):
         fix = "define the solid's volume in the .geo file (a Volume, e.g. Box or Extrude) and do not recombine it"
         return MeshError(where=source, problem=problem, fix=fix)
@@ -156,8 +160,8 @@ def _read_gmsh_file(path: Path):
                     tet_parts.append(nodes.reshape(-1, n_nodes)[:, :4])
                 else:
                     other_volume.add(name)
-        if not tet_parts:
-            raise _no_volume_error(source, other_volume)
+        if not tet_parts or other_volume:
+            raise _no_volume_error(source, other_volume, with_tetrahedra=bool(tet_parts))
         tets = np.searchsorted(sorted_tags, np.vstack(tet_parts)).astype(np.int64)
         groups = {}
         for dim, tag in gmsh.model.getPhysicalGroups(2):
@@ -165,7 +169,11 @@ def _read_gmsh_file(path: Path):
             parts = []
             for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
                 for element_type, _, nodes in zip(*gmsh.model.mesh.getElements(2, entity)):
-                    n_nodes = gmsh.model.mesh.getElementProperties(element_type)[3]
+                    element_name, _, _, n_nodes, _, _ = gmsh.model.mesh.getElementProperties(element_type)
+                    if not element_name.lower().startswith("triangle"):
+                        raise MeshError(where=f"{source}: group '{name}'",
+                                        problem=f"its surface cells are {element_name}; only triangles are supported",
+                                        fix="mesh the surfaces with triangles (no Recombine) and save again")
                     parts.append(nodes.reshape(-1, n_nodes)[:, :3])
             if parts:
                 groups[name] = np.searchsorted(sorted_tags, np.vstack(parts)).astype(np.int64)
@@ -201,8 +209,8 @@ def _read_meshio_file(path: Path):
                         fix="export it from gmsh as .msh (format 4.1 or 2.2) or another meshio format") from None
     tet_blocks = [block.data[:, :4] for block in data.cells if block.type in ("tetra", "tetra10")]
     other_volume = {block.type for block in data.cells if block.type in ("hexahedron", "wedge", "pyramid", "hexahedron20", "hexahedron27")}
-    if not tet_blocks:
-        raise _no_volume_error(source, other_volume)
+    if not tet_blocks or other_volume:
+        raise _no_volume_error(source, other_volume, with_tetrahedra=bool(tet_blocks))
     points = np.asarray(data.points, dtype=float)
     if points.shape[1] != 3:
         raise MeshError(where=source, problem="points are not 3-D", fix="export a 3-D mesh")

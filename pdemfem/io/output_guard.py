@@ -4,8 +4,8 @@
 
 Collective; rank 0 looks at the disk and every rank raises the same PdemfemError.
 
-* The output directory holds an earlier run's results (history.csv, an XDMF/HDF5 series,
-  plots): refused unless the run continues from a checkpoint (`restart`) or `force` (start
+* The output directory holds an earlier run's results (history.csv, an XDMF/HDF5 series or
+  an .h5 data file alone, plots): refused unless the run continues from a checkpoint (`restart`) or `force` (start
   afresh: with `clear`, those files are deleted first, so old and new never mix).
 * The checkpoint directory holds checkpoints (checkpoint_*.h5, latest.h5) and the run does not
   continue from one: refused even with `force` -- a run never deletes or overwrites checkpoints
@@ -36,9 +36,10 @@ def previous_results(output_dir: Path) -> list:
         found.append(output_dir / HISTORY)
     for index in sorted(output_dir.glob("*.xdmf")):
         found.append(index)
-        data = index.with_suffix(".h5")
-        if data.is_file():
-            found.append(data)
+    # The series' data, also without its index (a user who moved or deleted the .xdmf still has the results);
+    # checkpoints are the other rule's (they may share the folder through checkpoint.dir).
+    checkpoints = set(previous_checkpoints(output_dir))
+    found.extend(path for path in sorted(output_dir.glob("*.h5")) if path not in checkpoints)
     if (output_dir / PLOTS).is_dir():
         found.extend(sorted((output_dir / PLOTS).glob("*.png")))
     return found

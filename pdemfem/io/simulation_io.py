@@ -254,6 +254,7 @@ class SimulationIO:
                                   "and the event index): no random state is carried"},
             "insertion": {"complete": sim.streams is None, "inserted": int(sim.inserted_count)},
             "solids": list(sim.solids),
+            "input_files": sim.input_digests,
         }
         directory = checkpoint_directory(sim)
         path = ckpt.write_state(ckpt.checkpoint_path(directory, sim.step_count), comm, state, attributes=attributes,
@@ -293,6 +294,7 @@ class SimulationIO:
                 f"set time.dt: {stored!r} in the scene (the checkpoint's step, exactly; with --force, since time.dt "
                 f"is physics), or start afresh without --restart")
         changes = self._changes(attributes)
+        self._refuse_changed_input_files(where, attributes, force)
         self._refuse_other_particles(where, attributes, changes, force)
         self._refuse_replacing_other_physics(step)
         if sorted(attributes.get("solids", [])) != sorted(sim.solids):
@@ -344,6 +346,41 @@ class SimulationIO:
             log.warning("restart: the checkpoint's particles are continued as stored (positions, velocities, radii, "
                         "masses, temperatures); these changes of the scene take no effect on them: %s",
                         "; ".join(insertion_changes[:6]))
+
+    def _refuse_changed_input_files(self, where: str, attributes: dict, force: bool) -> None:
+        """A file the scene names (a solid's mesh, a mesh wall, a clump shape) whose content changed since the
+        checkpoint was written is physics the scene hash cannot see: refused as a changed key is, and a mesh wall's
+        even with --force (its vertices are stored state, as every wall's position).  Checkpoints written before
+        the files were recorded are not checked."""
+        stored = attributes.get("input_files")
+        if not isinstance(stored, dict):
+            return
+        current = self.sim.input_digests
+        changed = sorted(key for key in set(stored) | set(current) if stored.get(key) != current.get(key))
+        if not changed:
+            return
+        walls = [key for key in changed if key.startswith("walls")]
+        listed = ", ".join(f"{key} ({self._named_file(key)})" for key in changed[:4])
+        if walls or not force:
+            raise CheckpointError(
+                where, f"was written with other contents of {listed}{' ...' if len(changed) > 4 else ''}: the "
+                       f"file changed since (its sha256 differs)" + (", and a mesh wall's vertices are stored state, "
+                                                                     "so it is refused even with --force" if walls else ""),
+                "restore the file the checkpoint's run read, or start afresh without --restart" + (
+                    "" if walls else "; --force continues with the new file (the solid's stored displacements "
+                                     "are then applied to the new mesh's nodes)"))
+        if self.comm.rank == 0:
+            log.warning("restart: %s changed since the checkpoint was written; continuing with the new file (--force)",
+                        listed)
+
+    def _named_file(self, key: str) -> str:
+        """The file a key path like 'solids[0].mesh' names in the current scene ('?' when absent)."""
+        node = self.sim.scene
+        for part in key.replace("[", ".").replace("]", "").split("."):
+            node = node[int(part)] if part.isdigit() else getattr(node, part, None)
+            if node is None:
+                return "?"
+        return str(node)
 
     def _refuse_replacing_other_physics(self, step: int) -> None:
         """A restart writes its checkpoints under the names of their steps, so it replaces the checkpoints of later

@@ -110,6 +110,14 @@ def group_counts(scene: Scene) -> List[int]:
     return counts
 
 
+def contact_counts(scene: Scene) -> List[int]:
+    """How many particles of each group can take part in contacts during the run: group_counts, with a stream
+    counted as the most it inserts (its `count`; 2 without one: any two of its particles may meet).  The
+    time step and check's contact warnings look at every pair this admits."""
+    return [(2 if group.insert.count is None else int(group.insert.count)) if group.insert.kind == "stream" else count
+            for group, count in zip(scene.particles, group_counts(scene))]
+
+
 def particle_count(scene: Scene) -> int:
     """Total number of particles the scene inserts."""
     return int(sum(group_counts(scene)))
@@ -608,7 +616,8 @@ def _merged_surfaces(entries):
 
 def _pairs_with_radius(scene: Scene, with_shear: bool):
     smallest = []
-    for group, count in zip(scene.particles, group_counts(scene)):
+    # Streams' particles too: a scene fed by a stream alone needs the contact limits of dt as much.
+    for group, count in zip(scene.particles, contact_counts(scene)):
         material = scene.materials[group.material]
         radius, _ = group_radius_range(group)
         smallest.append((group.material, material, radius, smallest_contact_mass(group, material), count))

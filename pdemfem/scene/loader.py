@@ -34,6 +34,7 @@ from pdemfem.scene.schema import Scene
 __all__ = [
     "load_scene",
     "resolve_path",
+    "input_file_digests",
     "output_directory",
     "scene_hash",
     "scene_physics",
@@ -142,6 +143,19 @@ def _file_keys(node, path: KeyPath):
     elif isinstance(node, dict):
         for key, item in node.items():
             yield from _file_keys(item, path + (key,))
+
+
+def input_file_digests(scene: Scene, base_dir: Union[str, os.PathLike]) -> Dict[str, str]:
+    """sha256 (hex) of every file the scene names (solid meshes, mesh walls, clump shapes), by the key that
+    names it ('solids[0].mesh'): the scene hash covers the keys' text, not what the files hold."""
+    digests = {}
+    for path, value in _file_keys(scene, ()):
+        digest = hashlib.sha256()
+        with open(resolve_path(base_dir, value), "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+        digests[format_key_path(path)] = digest.hexdigest()
+    return digests
 
 
 def resolve_path(base_dir: Union[str, os.PathLike], value: Union[str, os.PathLike]) -> Path:

@@ -67,7 +67,8 @@ class InteractionConfig(StrictModel):
         "constant_torque", description="constant_torque (a constant moment against rolling) or elastic_plastic "
                                        "(a rolling spring-dashpot capped at the limit: bodies come to a true rest)")
     rolling_damping: Annotated[float, Field(ge=0)] = Field(
-        0.3, description="elastic_plastic only: the rolling dashpot as a fraction of its critical value")
+        0.3, description="elastic_plastic only: the rolling dashpot as a fraction of critical, for a body "
+                         "rocking about its contact point")
     work_of_adhesion: NonNegativeFloat = Field(0.0, description="jkr only: work of adhesion W [J/m^2] "
                                                                 "(twice the surface energy of like bodies)")
     # Linear spring-dashpot only: when absent, derived from the materials so that

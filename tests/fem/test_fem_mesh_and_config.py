@@ -66,6 +66,17 @@ def test_no_volume_cells(tmp_path):
     assert error.value.where == path
 
 
+def test_a_mesh_mixing_tetrahedra_with_other_cells_is_refused(tmp_path):
+    """Only tetrahedra are supported: the hexahedron of a mixed mesh was dropped without a word, and half a
+    block went missing (its mass, stiffness and supports) while check said OK."""
+    points = UNIT_TET + [[1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 1, 1], [2, 0, 0], [2, 1, 0], [2, 0, 1], [2, 1, 1]]
+    hexahedron = [1, 9, 10, 5, 6, 11, 12, 8]  # the unit cube x in [1, 2], beside the tetrahedron
+    path = _write(tmp_path / "mixed.vtu", points, [("tetra", [[0, 1, 2, 3]]), ("hexahedron", [hexahedron])])
+    with pytest.raises(MeshError, match="mixes tetrahedra with other volume cells") as error:
+        Solid(_config(path), material())
+    assert error.value.where == path and "hexahedron" in error.value.problem
+
+
 def test_inverted_cell_is_named(tmp_path):
     # cell 1 (0,1,2,4)... is built with the opposite orientation of cell 0
     path = _write(tmp_path / "inverted.vtu", UNIT_TET, [("tetra", [[0, 1, 2, 3], [1, 2, 4, 3][::-1]])])
