@@ -463,6 +463,20 @@ def _clump_sphere_count(group) -> int:
     return len(clump_spheres(group.clump)[1])
 
 
+# Measured: a 240,477-DOF P1 block (gmsh) took 737 MB per rank on 2 ranks for a short run, 1.07 GB above the two
+# ranks' ~200 MB baseline: PETSc's matrices and vectors and the static start's multigrid, ~4.5 KB per DOF.
+SOLID_BYTES_PER_DOF = 4500
+
+
+def _solid_memory_text(solids) -> str:
+    """' + ~X for the solids (N DOF, all ranks)' for built solids; '' without."""
+    if not solids:
+        return ""
+    dofs = sum(3 * solid.n_global_nodes for solid in solids.values())
+    return (f" + ~{_format_bytes(dofs * SOLID_BYTES_PER_DOF)} for the solids ({dofs} DOF at ~{SOLID_BYTES_PER_DOF} "
+            f"B/DOF, all ranks)")
+
+
 def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tuple:
     from pdemfem.scene import derived
     from pdemfem.scene.loader import scene_hash
@@ -529,7 +543,7 @@ def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tup
         per_particle = derived.bytes_per_particle(derived.contact_history_columns(scene))
         memory = derived.sphere_count(scene) * per_particle  # derived.memory_estimate_bytes
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({per_particle} B/particle, "
-                     f"all ranks) + ~200 MB per rank for Python, numba and PETSc")
+                     f"all ranks) + ~200 MB per rank for Python, numba and PETSc" + _solid_memory_text(solids))
         lines.append(f"work: {total * steps:.3g} particle-steps" + (" for the particles placed at the start (the "
                                                                    "streams' add to it)" if streams else ""))
         thermal = derived.thermal_step_limit(scene)

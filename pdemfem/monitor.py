@@ -329,16 +329,23 @@ def likely_causes(scene, dt: float, fastest: float, smallest_radius: float, thin
         causes.append(f"tunnelling through {', '.join(thin_surfaces)}: at {fastest:.3g} m/s a particle moves "
                       f"{fastest * dt / smallest_radius:.2f} radii per step (lower dt, or set "
                       f"time.expected_impact_speed to the real impact speed with dt: auto)")
-    if math.isfinite(fastest):
-        for ratio, label in derived.thin_surface_overlaps(scene, fastest):
+    # The overlaps at the faster of the measured and the expected speed: a diverged run's own speeds may be
+    # NaN, and check's warning for the expected impact speed names the same cause.
+    overlap_speed = speed if math.isfinite(speed) else None
+    if overlap_speed:
+        for ratio, label in derived.thin_surface_overlaps(scene, overlap_speed):
             if ratio > 1.0:
-                causes.append(f"tunnelling: {label} at {fastest:.3g} m/s overlaps {ratio:.2g} radii (the material is "
-                              f"too soft for that speed: raise youngs_modulus or lower the speed)")
-    if math.isfinite(fastest):
-        for ratio, kind, label, _ in derived.contact_overlaps(scene, fastest):
-            if ratio > 1.0 and kind == "particle_particle":
-                causes.append(f"contacts {label} at {fastest:.3g} m/s overlap {ratio:.2g} of the smaller radius (the "
+                causes.append(f"tunnelling: {label} at {overlap_speed:.3g} m/s overlaps {ratio:.2g} radii (the "
                               f"material is too soft for that speed: raise youngs_modulus or lower the speed)")
+        for ratio, kind, label, _ in derived.contact_overlaps(scene, overlap_speed):
+            if ratio > 1.0 and kind == "particle_particle":
+                causes.append(f"contacts {label} at {overlap_speed:.3g} m/s overlap {ratio:.2g} of the smaller radius "
+                              f"(the material is too soft for that speed: raise youngs_modulus or lower the speed)")
+    thermal = derived.thermal_step_limit(scene)
+    if thermal is not None and dt > thermal[0]:
+        causes.append(f"dt = {dt:.3g} s is {dt / thermal[0]:.3g} x the estimated thermal step limit {thermal[0]:.3g} s "
+                      f"of group '{thermal[1]}' (explicit conduction: temperatures overshoot and blow up); raise "
+                      f"heat_capacity, lower conductivity or dt (docs/heat.md)")
     causes.extend(derived.start_inside_walls(scene))
     if not math.isfinite(fastest):
         causes.append("a particle has an infinite or NaN velocity (check the initial velocities)")

@@ -240,3 +240,21 @@ def test_an_edited_mesh_file_is_refused_on_restart(tmp_path, capsys):
     _write_plate_files(tmp_path)  # the files as the checkpoint's run read them: accepted without --force
     code, _, err = run(capsys, "run", longer, "-o", tmp_path / "d", "--quiet", "--restart", checkpoint)
     assert code == 0, err
+
+
+def test_a_contact_surface_facing_away_from_the_particles_is_named(tmp_path, capsys):
+    """Contact is one-sided, from outside: a block's bottom listed under contact with the grains above it let
+    them fall into the block and rest inside it, with no warning from check or run."""
+    import yaml
+
+    scene = yaml.safe_load(PLATE)
+    scene["solids"][0]["contact"] = ["zmin"]
+    scene["solids"][0]["fixed"] = ["xmin"]
+    path = tmp_path / "away.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    code, out, err = run(capsys, "check", path)
+    assert code == 0 and "solids[0] (block): no face of its contact surface (zmin) faces where the particles" in out
+    scene["solids"][0]["contact"] = ["zmax"]
+    path.write_text(yaml.safe_dump(scene))
+    code, out, err = run(capsys, "check", path)
+    assert code == 0 and "faces where the particles" not in out

@@ -173,6 +173,30 @@ def test_disk_full_during_a_checkpoint_keeps_the_older_ones(workdir, capsys, mon
     assert xdmf  # the series writer is untouched
 
 
+def test_a_checkpoint_that_cannot_fit_is_refused_before_it_is_begun(workdir, capsys, monkeypatch):
+    """HDF5 crashed (SIGSEGV, exit 59 under PETSc's handler, a .tmp file left) when a real disk filled while rank 0
+    laid the checkpoint out: a checkpoint larger than the free space is refused before its file is created."""
+    import os
+
+    real_statvfs = os.statvfs
+    checkpoints = workdir / "results" / "checkpoints"
+
+    def nearly_full(path):
+        status = real_statvfs(path)
+        if Path(path).resolve() == checkpoints.resolve() and any(checkpoints.glob("checkpoint_*.h5")):
+            return os.statvfs_result((status.f_bsize, status.f_frsize, status.f_blocks, 10, 10, status.f_files,
+                                      status.f_ffree, status.f_favail, status.f_flag, status.f_namemax))
+        return status
+
+    monkeypatch.setattr(os, "statvfs", nearly_full)
+    code, _, err = run_main(capsys, "run", "scene.yaml", "--quiet")
+    assert code == 2 and "could not write the checkpoint (No space left on device: the checkpoint needs" in err, err
+    assert "Traceback" not in err
+    left = sorted(p.name for p in checkpoints.iterdir())
+    assert len(left) == 2 and left[1] == "latest.h5" and not any(".tmp" in name for name in left), left
+    ckpt.read_checkpoint(checkpoints / "latest.h5", MPI.COMM_WORLD)  # the first one, whole
+
+
 def test_disk_full_during_output_is_a_clean_error(workdir, capsys, monkeypatch):
     from pdemfem.io.history import HistoryWriter
 

@@ -78,6 +78,8 @@ def coupling_report(scene, base_dir, dt: float, comm=None, warnings=None, solids
             warnings.extend(_damping_cost(index, config, solid, substeps))
         if config.contact and scene.particles:
             lines.extend(_contact_figures(scene, config, solid, interval, warnings))
+            if warnings is not None:
+                warnings.extend(_facing_away(index, config, solid, scene))
     return lines
 
 
@@ -189,6 +191,32 @@ def _contact_figures(scene, config, solid, interval: float, warnings, limits=Non
     return lines
 
 
+def _facing_away(index: int, config, solid, scene) -> list:
+    """Collective: a warning when no triangle of the solid's contact surface faces any point where the particles
+    start (a region's corners, listed positions).  Contact is one-sided, from the outside: particles that come
+    from behind a contact face pass into the solid (a block's bottom listed under contact, the grains above it
+    fell through the block and rested inside it, with no warning)."""
+    from pdemfem.scene.derived import _group_points
+
+    points = np.array([point for group in scene.particles for point in _group_points(group)], dtype=float)
+    if not len(points):
+        return []
+    # The corners of the box around them: a few points however many particles are listed.
+    low, high = points.min(axis=0), points.max(axis=0)
+    starts = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])
+    nodes, positions, _ = solid.surface_state()
+    triangles = np.searchsorted(nodes, solid.surface_triangles())
+    a, b, c = positions[triangles[:, 0]], positions[triangles[:, 1]], positions[triangles[:, 2]]
+    normals = np.cross(b - a, c - a)  # outward, |n| = twice the area
+    sides = np.einsum("tj,ptj->pt", normals, starts[:, None, :] - ((a + b + c) / 3.0)[None, :, :])
+    if np.any(sides > 0.0):
+        return []
+    return [f"solids[{index}] ({config.name}): no face of its contact surface ({', '.join(config.contact)}) faces "
+            f"where the particles start (every outward normal points away from them); contact is one-sided, from "
+            f"outside, so particles reaching it pass into the solid: list the faces they land on under "
+            f"solids[{index}].contact"]
+
+
 def coupling_assessment(scene, solids: dict, dt: float) -> tuple:
     """Collective, for already built solids (run): (the coupled-stability warnings of `pdemfem check`,
     the longest interval fem_every x dt the held contact force allows over all solids [s], the names of
@@ -202,4 +230,5 @@ def coupling_assessment(scene, solids: dict, dt: float) -> tuple:
         found.extend(_damping_cost(index, config, solid, solid.substeps(interval)))
         if config.contact and scene.particles:
             _contact_figures(scene, config, solid, interval, found, limits, point_loaded)
+            found.extend(_facing_away(index, config, solid, scene))
     return found, min(limits.values(), default=math.inf), point_loaded

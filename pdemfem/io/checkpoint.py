@@ -409,19 +409,29 @@ def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | No
     attributes.setdefault("format_version", FORMAT_VERSION)
     encoded, as_json = _encode_attributes(attributes)
     try:
-        _write_file(temporary, comm, encoded, as_json, particle_arrays, global_arrays, slab_arrays, contact_arrays,
-                    particle_key, contact_key)
-        failure = None
+        # HDF5 crashed (SIGSEGV) instead of failing when the disk filled while rank 0 laid the file out: a file that
+        # cannot fit is refused before it is begun.
+        failure = _space_shortage(path.parent, comm, as_json, particle_arrays, global_arrays, slab_arrays,
+                                  contact_arrays)
+        if failure is None:
+            _write_file(temporary, comm, encoded, as_json, particle_arrays, global_arrays, slab_arrays,
+                        contact_arrays, particle_key, contact_key)
     except (OSError, RuntimeError) as exc:  # disk full, quota, I/O error (h5py: OSError, some RuntimeError)
         failure = str(exc) if isinstance(exc, _WriteFailed) else write_error_text(exc)
     failure = agree_on_error(comm, failure)
     if failure is not None:
+        earlier = None
         if comm.rank == 0:
             temporary.unlink(missing_ok=True)
-        raise CheckpointError(str(path), f"could not write the checkpoint ({failure}); the earlier checkpoints in "
-                                         f"{path.parent} are intact",
-                              "free disk space (or choose another checkpoint.dir / -o), then continue from the "
-                              "latest intact checkpoint with --restart")
+            earlier = any(path.parent.glob(f"{PREFIX}*.h5"))
+        if comm.bcast(earlier, root=0):
+            raise CheckpointError(str(path), f"could not write the checkpoint ({failure}); the earlier checkpoints "
+                                             f"in {path.parent} are intact",
+                                  "free disk space (or choose another checkpoint.dir / -o), then continue from the "
+                                  "latest intact checkpoint with --restart")
+        raise CheckpointError(str(path), f"could not write the checkpoint ({failure}); it was the run's first, so "
+                                         f"there is none to continue from",
+                              "free disk space (or choose another checkpoint.dir / -o), then run again")
     error = None
     if comm.rank == 0:
         try:
@@ -440,6 +450,30 @@ def write_checkpoint(path, comm, particle_arrays: dict, global_arrays: dict | No
         raise CheckpointError(str(path), f"could not install the checkpoint ({error})",
                               "check free space and permissions of checkpoint.dir")
     return path
+
+
+def _space_shortage(folder: Path, comm, as_json, particle_arrays, global_arrays, slab_arrays,
+                    contact_arrays) -> str | None:
+    """Collective: None when the checkpoint's data (every rank's arrays, rank 0's global arrays and attributes,
+    plus 5 % and 1 MiB for HDF5's own structures) fits in the free space of `folder`, else the reason."""
+    local = sum(np.asarray(value).nbytes for value in (particle_arrays or {}).values())
+    local += sum(np.asarray(value).nbytes for value in (contact_arrays or {}).values())
+    local += sum(np.asarray(rows).nbytes for rows, _ in (slab_arrays or {}).values())
+    if comm.rank == 0:
+        local += sum(np.asarray(value).nbytes for value in (global_arrays or {}).values()) + len(str(as_json))
+    needed = comm.allreduce(int(local)) * 1.05 + (1 << 20)
+    free = None
+    if comm.rank == 0:
+        try:
+            status = os.statvfs(folder)
+            free = status.f_bavail * status.f_frsize
+        except OSError:
+            free = None  # unknown: the write itself reports what fails
+    free = comm.bcast(free, root=0)
+    if free is None or free >= needed:
+        return None
+    return (f"No space left on device: the checkpoint needs ~{needed / 2**20:.1f} MiB, {free / 2**20:.1f} MiB are "
+            f"free in {folder}")
 
 
 # Largest single pwrite (Linux moves at most 2 GiB - 4 KiB per call).

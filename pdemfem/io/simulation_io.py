@@ -336,8 +336,26 @@ class SimulationIO:
                        f"cannot add or remove any, so it is refused even with --force",
                 "restore the particle groups of the scene that wrote the checkpoint (their counts and insertion), "
                 "or start afresh without --restart")
-        insertion_changes = [text for text in changes if ".insert." in text or ".radius" in text
-                             or ".clump" in text or ".initial_temperature" in text]
+        streams = {f"particles[{index}]" for index, group in enumerate(sim.scene.particles)
+                   if group.insert.kind == "stream"}
+        schedule = [text for text in changes if text.split(".insert.")[0] in streams
+                    and any(f".insert.{key}:" in text for key in ("rate", "mass_rate", "start"))]
+        if schedule:
+            # A stream inserts up to rate x (t - start) by time t: a new rate or start would apply from the stream's
+            # start, and the stream would burst to catch up (or pause) after the restart.
+            raise CheckpointError(
+                where, f"changes a stream's schedule ({'; '.join(schedule[:4])}): a stream inserts rate x (t - start) "
+                       f"particles by time t, so the change would apply from its start and the stream would burst "
+                       f"or pause to catch up; refused even with --force",
+                "keep the stream's rate, mass_rate and start, and add a second stream group for the new rate "
+                "(starting at the restart's time), or start afresh without --restart")
+        # What streams insert from now on takes the scene's region, velocity, radii and seed.
+        stream_changes = [text for text in changes if text.split(".")[0] in streams]
+        insertion_changes = [text for text in changes if text not in stream_changes and (
+            ".insert." in text or ".radius" in text or ".clump" in text or ".initial_temperature" in text)]
+        if force and stream_changes and self.comm.rank == 0:
+            log.warning("restart: the streams insert their next particles as the scene now says: %s",
+                        "; ".join(stream_changes[:6]))
         # The particles' masses and inertia are stored with them: a density change reaches the solids only.
         particle_materials = {group.material for group in sim.scene.particles}
         insertion_changes += [text for text in all_changes

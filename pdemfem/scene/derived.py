@@ -950,11 +950,19 @@ def start_inside_walls(scene: Scene) -> List[str]:
     found = []
     for index, group in enumerate(scene.particles):
         for wall in _plane_walls(scene):
-            if _region_behind_wall(group, wall):
+            if _region_behind_wall(group, wall, wholly=group.insert.kind == "stream"):
+                # A stream does not insert a candidate that touches a wall: behind one wholly, it inserts nothing.
                 found.append(
+                    f"particles[{index}] ({group.name}): the stream's region lies wholly behind wall '{wall.name}', "
+                    f"so it inserts nothing (normal points into the domain): move the region or the wall"
+                    if group.insert.kind == "stream" else
                     f"particles[{index}] ({group.name}) starts partly behind or inside wall '{wall.name}' "
                     f"(normal points into the domain): move the region or the wall"
                 )
+        if group.insert.kind == "stream" and group.insert.start >= scene.time.end:
+            found.append(f"particles[{index}] ({group.name}): the stream starts at t = {group.insert.start:g} s, at "
+                         f"or after time.end = {scene.time.end:g} s, so it inserts nothing: lower "
+                         f"particles[{index}].insert.start or raise time.end")
     return found
 
 
@@ -1097,12 +1105,17 @@ def contact_overlaps(scene: Scene, speed: float) -> List[Tuple[float, str, str, 
     return _merged_surfaces(entries)
 
 
-def _region_behind_wall(group: ParticleGroupConfig, wall: WallConfig) -> bool:
-    """True when the group's insertion region reaches behind the plane wall (False for listed positions)."""
+def _region_behind_wall(group: ParticleGroupConfig, wall: WallConfig, wholly: bool = False) -> bool:
+    """True when the group's insertion region reaches behind the plane wall (`wholly`: lies entirely behind it,
+    touching it at most), False for listed positions."""
     if group.insert.kind == "list":
         return False
     length = _norm(wall.normal)
     normal = tuple(c / length for c in wall.normal)
     # Region boxes bound the particles themselves (centres lie at least a radius inside).
-    return any(_dot(normal, corner) - _dot(normal, wall.point) < -1e-12 * max(1.0, abs(_dot(normal, corner)))
-               for corner in _group_points(group))
+    behind = [_dot(normal, corner) - _dot(normal, wall.point) < -1e-12 * max(1.0, abs(_dot(normal, corner)))
+              for corner in _group_points(group)]
+    if wholly:
+        return all(_dot(normal, corner) - _dot(normal, wall.point) <= 1e-12 * max(1.0, abs(_dot(normal, corner)))
+                   for corner in _group_points(group))
+    return any(behind)

@@ -1,0 +1,40 @@
+"""The run monitor's diagnosis of a divergence (pdemfem.monitor.likely_causes) names the limit `check` warned
+about, also when the diverged run's own speeds are no longer finite."""
+from __future__ import annotations
+
+import math
+
+from pdemfem.monitor import likely_causes
+from pdemfem.scene.loader import load_scene
+
+
+def _grains(heated=False, **changes):
+    scene = {"time": {"end": 0.05, "dt": "auto"}, "gravity": [0, 0, -9.81],
+             "materials": {"glass": {"density": 2500, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3}},
+             "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.5}},
+             "particles": [{"name": "grains", "material": "glass", "radius": 0.001,
+                            "insert": {"kind": "lattice", "region": {"box": [[0, 0, 0.001], [0.02, 0.02, 0.02]]},
+                                       "count": 200}}],
+             "walls": [{"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1],
+                        "material": "glass"}]}
+    if heated:
+        scene["materials"]["glass"].update(conductivity=1.0, heat_capacity=1e-15)
+        scene["walls"][0]["temperature"] = 500.0
+    scene.update(changes)
+    return load_scene(scene)[0]
+
+
+def test_overlaps_at_the_expected_speed_are_named_when_the_run_has_no_finite_speed():
+    """Gravity 1e4 g: check warns that the spheres meet at 59 m/s and pass through each other; the run that
+    diverges on it named "none of the known limits" (its measured speeds were NaN)."""
+    scene = _grains(gravity=[0, 0, -9.81e4])
+    causes = likely_causes(scene, 1e-6, math.nan, 0.001, [])
+    assert any(text.startswith("contacts glass-glass at") and "overlap" in text for text in causes), causes
+    assert not any(text.startswith("none of the known limits") for text in causes)
+
+
+def test_a_step_above_the_thermal_limit_is_named():
+    """heat_capacity 1e-15: check warns that dt is far above the thermal step limit; the run's stop on the
+    non-finite temperatures named "none of the known limits"."""
+    causes = likely_causes(_grains(heated=True), 9e-6, math.nan, 0.001, [])
+    assert any("thermal step limit" in text and "heat_capacity" in text for text in causes), causes
