@@ -195,7 +195,9 @@ class DivergenceMonitor:
                        f"radius: contacts are missed)")
         # Collective on every rank at every check (it resets the kernels' records).
         overlap_problem = self._overlap_problem()
-        if problem is None and system.heat and system.largest_heat_step_ratio > 1.0:
+        # Before any other finding: an unstable temperature update is what turns the temperatures (and then the
+        # energies) non-finite.
+        if system.heat and system.largest_heat_step_ratio > 1.0:
             raise SolverError(
                 f"run stopped at step {sim.step_count} (t = {sim.time:.6g} s)",
                 f"the temperature update is unstable: dt sum(H) / (m c) reached {system.largest_heat_step_ratio:.3g} "

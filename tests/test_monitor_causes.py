@@ -8,7 +8,7 @@ from pdemfem.monitor import likely_causes
 from pdemfem.scene.loader import load_scene
 
 
-def _grains(heated=False, **changes):
+def _grains_dict(heated=False, capacity=1e-15, **changes):
     scene = {"time": {"end": 0.05, "dt": "auto"}, "gravity": [0, 0, -9.81],
              "materials": {"glass": {"density": 2500, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3}},
              "interactions": {"default": {"model": "hertz_mindlin", "restitution": 0.5, "friction": 0.5}},
@@ -18,10 +18,14 @@ def _grains(heated=False, **changes):
              "walls": [{"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1],
                         "material": "glass"}]}
     if heated:
-        scene["materials"]["glass"].update(conductivity=1.0, heat_capacity=1e-15)
+        scene["materials"]["glass"].update(conductivity=1.0, heat_capacity=capacity)
         scene["walls"][0]["temperature"] = 500.0
     scene.update(changes)
-    return load_scene(scene)[0]
+    return scene
+
+
+def _grains(heated=False, **changes):
+    return load_scene(_grains_dict(heated, **changes))[0]
 
 
 def test_overlaps_at_the_expected_speed_are_named_when_the_run_has_no_finite_speed():
@@ -38,3 +42,21 @@ def test_a_step_above_the_thermal_limit_is_named():
     non-finite temperatures named "none of the known limits"."""
     causes = likely_causes(_grains(heated=True), 9e-6, math.nan, 0.001, [])
     assert any("thermal step limit" in text and "heat_capacity" in text for text in causes), causes
+
+
+def test_a_temperature_blow_up_is_named_as_the_thermal_limit(tmp_path):
+    """The temperatures turned non-finite before the run's check, which then reported
+    "non-finite energies" with "none of the known limits"; the unstable temperature update is named first."""
+    import pytest
+
+    from pdemfem import Simulation
+    from pdemfem.errors import SolverError
+
+    # So small a capacity that the temperatures overflow within a few steps of the first contact with the hot
+    # floor, before the run's next check (every 100 steps).
+    scene = _grains_dict(heated=True, capacity=1e-30)
+    scene["time"]["end"] = 0.02
+    sim = Simulation.from_dict(scene, output_dir=tmp_path)
+    with pytest.raises(SolverError) as stopped:
+        sim.run(progress=False)
+    assert "the temperature update is unstable" in str(stopped.value)
