@@ -60,3 +60,24 @@ def test_a_temperature_blow_up_is_named_as_the_thermal_limit(tmp_path):
     with pytest.raises(SolverError) as stopped:
         sim.run(progress=False)
     assert "the temperature update is unstable" in str(stopped.value)
+
+
+def test_a_restart_that_stops_at_once_writes_no_second_row(tmp_path):
+    """A restart from the checkpoint a diverged run left stops again at its first check: it wrote the
+    checkpoint's row (and field step) a second time."""
+    import pytest
+
+    from pdemfem import Simulation
+    from pdemfem.errors import SolverError
+    from pdemfem.plot import read_history
+
+    scene = _grains_dict(heated=True, capacity=1e-30)
+    scene["time"]["end"] = 0.02
+    scene["checkpoint"] = {"every": 0.01}
+    with pytest.raises(SolverError):
+        Simulation.from_dict(scene, output_dir=tmp_path).run(progress=False)
+    latest = tmp_path / "checkpoints" / "latest.h5"
+    with pytest.raises(SolverError):
+        Simulation.from_dict(scene, output_dir=tmp_path, restart=latest).run(progress=False)
+    steps = read_history(tmp_path / "history.csv")["step"]
+    assert len(set(steps)) == len(steps), steps

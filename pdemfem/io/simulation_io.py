@@ -103,9 +103,13 @@ class SimulationIO:
         columns = sim.history_columns()
         history_path = sim.output_dir / "history.csv"
         append = sim.step_count > 0
+        has_resume_row = False
         if comm.rank == 0 and append and self.resume_step is not None:
-            _truncate_history(history_path, self.resume_step)
-        comm.Barrier()
+            has_resume_row = _truncate_history(history_path, self.resume_step)
+        if comm.bcast(has_resume_row, root=0):
+            # The checkpoint's step has its row and field step already: a run stopped there at once (diverged
+            # again, or by a signal) must not write them twice.
+            self._last_output_step = self.resume_step
         self._history = HistoryWriter(history_path, columns, comm.rank == 0, append=append)
         output = sim.scene.output
         if self.particle_fields():
@@ -473,14 +477,15 @@ class SimulationIO:
 OPTIONAL_COMPONENT = "surface_force_means"
 
 
-def _truncate_history(path: Path, step: int) -> None:
-    """Keep the header and the rows up to `step` (a restart continues the table)."""
+def _truncate_history(path: Path, step: int) -> bool:
+    """Keep the header and the rows up to `step` (a restart continues the table); whether a row of `step` is
+    among them."""
     if not path.exists():
-        return
+        return False
     with open(path, newline="") as handle:
         rows = list(csv.reader(handle))
     if not rows:
-        return
+        return False
     header, body = rows[0], rows[1:]
     column = header.index("step") if "step" in header else None
     # A row cut short by a kill mid-write (fewer fields than the header) is dropped, not parsed.
@@ -491,6 +496,7 @@ def _truncate_history(path: Path, step: int) -> None:
         writer.writerow(header)
         writer.writerows(kept)
     temporary.replace(path)
+    return column is not None and bool(kept) and int(float(kept[-1][column])) == step
 
 
 class _SolidOutputLayout:
