@@ -192,7 +192,8 @@ def _contact_figures(scene, config, solid, interval: float, warnings, limits=Non
 
 
 def _facing_away(index: int, config, solid, scene) -> list:
-    """Collective: a warning when no triangle of the solid's contact surface faces any point where the particles
+    """`check` (one process, the whole surface): a warning when no triangle of the solid's contact surface faces any
+    point where the particles
     start (a region's corners, listed positions).  Contact is one-sided, from the outside: particles that come
     from behind a contact face pass into the solid (a block's bottom listed under contact, the grains above it
     fell through the block and rested inside it, with no warning)."""
@@ -206,6 +207,8 @@ def _facing_away(index: int, config, solid, scene) -> list:
     starts = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])
     nodes, positions, _ = solid.surface_state()
     triangles = np.searchsorted(nodes, solid.surface_triangles())
+    if len(positions) != len(nodes) or (triangles.size and triangles.max() >= len(positions)):
+        return []  # a rank holding part of the surface only (check under mpiexec): the check is check's, serial
     a, b, c = positions[triangles[:, 0]], positions[triangles[:, 1]], positions[triangles[:, 2]]
     normals = np.cross(b - a, c - a)  # outward, |n| = twice the area
     sides = np.einsum("tj,ptj->pt", normals, starts[:, None, :] - ((a + b + c) / 3.0)[None, :, :])
@@ -230,5 +233,4 @@ def coupling_assessment(scene, solids: dict, dt: float) -> tuple:
         found.extend(_damping_cost(index, config, solid, solid.substeps(interval)))
         if config.contact and scene.particles:
             _contact_figures(scene, config, solid, interval, found, limits, point_loaded)
-            found.extend(_facing_away(index, config, solid, scene))
     return found, min(limits.values(), default=math.inf), point_loaded
