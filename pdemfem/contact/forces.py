@@ -168,8 +168,9 @@ def pair_forces(row_particles, pair_starts, pair_ends, neighbor_partners, pair_h
             if composition & ROLLING_ANY:
                 effective_inertia = 1.0 / (inverse_inertia[i] + inverse_inertia[j])
                 # Each body's inertia about the contact point, I + m r^2, in series (Ai et al. 2011, eq. 27).
-                rolling_inertia = 1.0 / (1.0 / (1.0 / inverse_inertia[i] + mass[i] * radius_i * radius_i)
-                                         + 1.0 / (1.0 / inverse_inertia[j] + mass[j] * radius_j * radius_j))
+                about_contact_i = 1.0 / inverse_inertia[i] + mass[i] * radius_i * radius_i
+                about_contact_j = 1.0 / inverse_inertia[j] + mass[j] * radius_j * radius_j
+                rolling_inertia = about_contact_i * about_contact_j / (about_contact_i + about_contact_j)
             fx, fy, fz, mx, my, mz, elastic, dissipated, _, _ = contact_response(
                 composition, coefficients, material_i, material_j, nx, ny, nz, overlap, vx, vy, vz,
                 previous_vx, previous_vy, previous_vz, wxi - wxj, wyi - wyj, wzi - wzj, effective_mass,

@@ -193,8 +193,7 @@ def _contact_figures(scene, config, solid, interval: float, warnings, limits=Non
 
 def _facing_away(index: int, config, solid, scene) -> list:
     """`check` (one process, the whole surface): a warning when no triangle of the solid's contact surface faces any
-    point where the particles
-    start (a region's corners, listed positions).  Contact is one-sided, from the outside: particles that come
+    point where the particles start (a region's corners, listed positions).  Contact is one-sided, from the outside: particles that come
     from behind a contact face pass into the solid (a block's bottom listed under contact, the grains above it
     fell through the block and rested inside it, with no warning)."""
     from pdemfem.scene.derived import _group_points

@@ -46,7 +46,7 @@ from pdemfem.errors import CheckpointError, OutputError
 from pdemfem.io import checkpoint as ckpt
 from pdemfem.io.history import HistoryWriter
 from pdemfem.io.output_guard import agree_on_error, prepare_output, write_error_text
-from pdemfem.scene.loader import resolve_path, scene_hash, scene_physics
+from pdemfem.scene.loader import input_files, resolve_path, scene_hash, scene_physics
 from pdemfem.state_dict import StateMismatch
 
 log = logging.getLogger("pdemfem")
@@ -382,7 +382,8 @@ class SimulationIO:
         if not changed:
             return
         walls = [key for key in changed if key.startswith("walls")]
-        listed = ", ".join(f"{key} ({self._named_file(key)})" for key in changed[:4])
+        named = input_files(self.sim.scene)
+        listed = ", ".join(f"{key} ({named.get(key, '?')})" for key in changed[:4])
         if walls or not force:
             raise CheckpointError(
                 where, f"was written with other contents of {listed}{' ...' if len(changed) > 4 else ''}: the "
@@ -394,15 +395,6 @@ class SimulationIO:
         if self.comm.rank == 0:
             log.warning("restart: %s changed since the checkpoint was written; continuing with the new file (--force)",
                         listed)
-
-    def _named_file(self, key: str) -> str:
-        """The file a key path like 'solids[0].mesh' names in the current scene ('?' when absent)."""
-        node = self.sim.scene
-        for part in key.replace("[", ".").replace("]", "").split("."):
-            node = node[int(part)] if part.isdigit() else getattr(node, part, None)
-            if node is None:
-                return "?"
-        return str(node)
 
     def _refuse_replacing_other_physics(self, step: int) -> None:
         """A restart writes its checkpoints under the names of their steps, so it replaces the checkpoints of later

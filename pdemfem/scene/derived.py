@@ -1112,10 +1112,10 @@ def _region_behind_wall(group: ParticleGroupConfig, wall: WallConfig, wholly: bo
         return False
     length = _norm(wall.normal)
     normal = tuple(c / length for c in wall.normal)
-    # Region boxes bound the particles themselves (centres lie at least a radius inside).
-    behind = [_dot(normal, corner) - _dot(normal, wall.point) < -1e-12 * max(1.0, abs(_dot(normal, corner)))
-              for corner in _group_points(group)]
+    # Region boxes bound the particles themselves (centres lie at least a radius inside).  Each corner's height
+    # above the plane, against the round-off of its coordinate.
+    heights = [(_dot(normal, corner) - _dot(normal, wall.point), 1e-12 * max(1.0, abs(_dot(normal, corner))))
+               for corner in _group_points(group)]
     if wholly:
-        return all(_dot(normal, corner) - _dot(normal, wall.point) <= 1e-12 * max(1.0, abs(_dot(normal, corner)))
-                   for corner in _group_points(group))
-    return any(behind)
+        return all(height <= round_off for height, round_off in heights)
+    return any(height < -round_off for height, round_off in heights)

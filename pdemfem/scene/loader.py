@@ -34,6 +34,7 @@ from pdemfem.scene.schema import Scene
 __all__ = [
     "load_scene",
     "resolve_path",
+    "input_files",
     "input_file_digests",
     "output_directory",
     "scene_hash",
@@ -145,16 +146,22 @@ def _file_keys(node, path: KeyPath):
             yield from _file_keys(item, path + (key,))
 
 
+def input_files(scene: Scene) -> Dict[str, str]:
+    """Every file the scene names (solid meshes, mesh walls, clump shapes) as written, by the key that names it
+    ('solids[0].mesh')."""
+    return {format_key_path(path): str(value) for path, value in _file_keys(scene, ())}
+
+
 def input_file_digests(scene: Scene, base_dir: Union[str, os.PathLike]) -> Dict[str, str]:
-    """sha256 (hex) of every file the scene names (solid meshes, mesh walls, clump shapes), by the key that
-    names it ('solids[0].mesh'): the scene hash covers the keys' text, not what the files hold."""
+    """sha256 (hex) of every file of `input_files`, by the same keys: the scene hash covers the keys' text, not
+    what the files hold."""
     digests = {}
-    for path, value in _file_keys(scene, ()):
+    for key, value in input_files(scene).items():
         digest = hashlib.sha256()
         with open(resolve_path(base_dir, value), "rb") as handle:
             for block in iter(lambda: handle.read(1 << 20), b""):
                 digest.update(block)
-        digests[format_key_path(path)] = digest.hexdigest()
+        digests[key] = digest.hexdigest()
     return digests
 
 
