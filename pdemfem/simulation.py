@@ -340,12 +340,18 @@ class Simulation:
         checkpoints are on, then re-raise the SolverError (exit 3) on every rank."""
         try:
             check()
-        except SolverError:
+        except SolverError as error:
             self.stopped_by = "divergence"
             self.io.write_output()
-            if self.scene.checkpoint.every:
-                self.io.write_checkpoint()
-            raise
+            if not self.scene.checkpoint.every:
+                raise
+            path = self.io.write_checkpoint(diverged=True)
+            earlier = self.io.last_checkpoint
+            restart = (f"the last checkpoint before it is {earlier[1]} (step {earlier[0]}; latest.h5 is not moved "
+                       f"to the stopped state): continue from it with --restart once fixed" if earlier is not None else
+                       "there is no checkpoint before it: run again once fixed")
+            raise SolverError(error.where, f"{error.problem}\n  the state at the stop is kept for inspection in "
+                                           f"{path}; {restart}", error.fix) from None
 
     @collective_errors
     def write_checkpoint(self):

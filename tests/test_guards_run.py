@@ -6,6 +6,8 @@ the history (docs/stability_guards.md lists the before/after figures).
 """
 from __future__ import annotations
 
+import os
+
 import csv
 import math
 import subprocess
@@ -241,7 +243,15 @@ def test_tiny_restitution_blows_up_at_the_old_default_and_is_stable_with_dt_auto
     stopped = int(rows[-1]["step"])
     # Checkpoints were on (every 1e-4 s = 4 steps): the stop wrote one of its own step, between two.
     assert stopped % 4 != 0, stopped
-    assert checkpoint_path(workdir / "out" / "checkpoints", stopped).exists()
+    # It is kept apart from the good ones: latest.h5 stays on the last checkpoint before the stop (none when the
+    # stop came before the first).
+    folder = workdir / "out" / "checkpoints"
+    diverged = checkpoint_path(folder, stopped)
+    assert diverged.with_name(f"{diverged.stem}_diverged.h5").exists(), sorted(folder.iterdir())
+    if stopped >= 4:
+        assert os.path.samefile(folder / "latest.h5", checkpoint_path(folder, stopped - stopped % 4))
+    else:
+        assert not (folder / "latest.h5").exists() and "there is no checkpoint before it" in err
     (workdir / "out").rename(workdir / "coarse")
     code, _, err = run_cli(capsys, workdir, scene.replace("DT", "auto").replace("CHECKPOINT", ""))
     assert code == 0, err

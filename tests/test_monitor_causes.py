@@ -76,8 +76,36 @@ def test_a_restart_that_stops_at_once_writes_no_second_row(tmp_path):
     scene["checkpoint"] = {"every": 0.01}
     with pytest.raises(SolverError):
         Simulation.from_dict(scene, output_dir=tmp_path).run(progress=False)
-    latest = tmp_path / "checkpoints" / "latest.h5"
+    (stopped,) = (tmp_path / "checkpoints").glob("checkpoint_*_diverged.h5")
     with pytest.raises(SolverError):
-        Simulation.from_dict(scene, output_dir=tmp_path, restart=latest).run(progress=False)
+        Simulation.from_dict(scene, output_dir=tmp_path, restart=stopped).run(progress=False)
     steps = read_history(tmp_path / "history.csv")["step"]
     assert len(set(steps)) == len(steps), steps
+
+
+def test_the_stopped_state_does_not_become_latest_nor_push_out_the_good_checkpoints(tmp_path):
+    """A diverged run's state was written as the newest checkpoint: latest.h5 pointed at the broken state and,
+    with checkpoint.keep, pruning deleted the good checkpoints before it.  It is kept apart now
+    (checkpoint_<step>_diverged.h5), and the message names the last good checkpoint."""
+    import os
+
+    import pytest
+
+    from pdemfem import Simulation
+    from pdemfem.errors import SolverError
+
+    scene = _grains_dict(heated=True, capacity=1e-30)
+    scene["time"]["end"] = 0.02
+    scene["checkpoint"] = {"every": 0.0005, "keep": 2}  # ~55 steps: several checkpoints before the blow-up
+    with pytest.raises(SolverError) as stopped:
+        Simulation.from_dict(scene, output_dir=tmp_path).run(progress=False)
+    folder = tmp_path / "checkpoints"
+    good = sorted(folder.glob("checkpoint_????????????.h5"))
+    (diverged,) = folder.glob("checkpoint_*_diverged.h5")
+    assert len(good) == 2, good  # keep 2: the stopped state pushed out none of them
+    assert int(diverged.name[len("checkpoint_"):][:12]) > int(good[-1].stem[len("checkpoint_"):])
+    assert os.path.samefile(folder / "latest.h5", good[-1])
+    assert str(diverged) in str(stopped.value) and str(good[-1]) in str(stopped.value)
+    # The good checkpoint restarts (the scene unchanged, so it diverges again, from the good state).
+    with pytest.raises(SolverError):
+        Simulation.from_dict(scene, output_dir=tmp_path, restart=folder / "latest.h5").run(progress=False)

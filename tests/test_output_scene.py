@@ -15,7 +15,9 @@ sys.path.insert(0, str(Path(__file__).parent / "mpi_cases"))
 STEPS = 40
 
 
-def check_files(out: Path, data) -> None:
+def check_files(out: Path, data, plate_temperature: bool) -> None:
+    """plate_temperature: the plate was given an initial temperature, so its series has a temperature field
+    (a solid that neither conducts nor has a temperature writes none: it was a constant 293.15 K)."""
     import h5py
     import meshio
 
@@ -43,7 +45,9 @@ def check_files(out: Path, data) -> None:
     lookup = {tuple(p): k for k, p in enumerate(node_points)}
     rows = np.array([lookup[tuple(p)] for p in points])
     assert len(set(rows)) == len(points)
-    for name, key in (("displacements", "node_u"), ("velocities", "node_v"), ("temperature", "node_T")):
+    assert ("temperature" in point_data) == plate_temperature, sorted(point_data)
+    nodal = [("displacements", "node_u"), ("velocities", "node_v")]
+    for name, key in nodal + ([("temperature", "node_T")] if plate_temperature else []):
         assert np.array_equal(np.asarray(point_data[name]).reshape(len(points), -1),
                               data[key][rows].reshape(len(points), -1)), name
     assert np.abs(data["node_u"]).max() > 0  # the plate moved: the comparison is not 0 == 0
@@ -63,11 +67,13 @@ def test_output_serial_p1(tmp_path):
     scene = restart_scenes.heated(restart_scenes.pile_scene(tmp_path, STEPS, STEPS // 2, element="P1"))
     simulation = Simulation.from_dict(scene, comm=MPI.COMM_WORLD, base_dir=tmp_path)
     simulation.run(progress=False)
-    check_files(tmp_path, restart_output.dump(simulation))
+    check_files(tmp_path, restart_output.dump(simulation), plate_temperature=False)
     assert (tmp_path / "history.csv").read_text().count("\n") == 4
 
 
 @pytest.mark.mpi
 def test_output_two_ranks_p2(tmp_path):
-    run_under_mpi(2, "restart_output.py", tmp_path, STEPS, "P2", tmp_path / "state.npz")
-    check_files(tmp_path, np.load(tmp_path / "state.npz"))
+    run_under_mpi(2, "restart_output.py", tmp_path, STEPS, "P2", tmp_path / "state.npz", 310.0)
+    data = np.load(tmp_path / "state.npz")
+    assert np.all(data["node_T"] == 310.0)
+    check_files(tmp_path, data, plate_temperature=True)

@@ -197,7 +197,10 @@ def test_a_checkpoint_that_cannot_fit_is_refused_before_it_is_begun(workdir, cap
     ckpt.read_checkpoint(checkpoints / "latest.h5", MPI.COMM_WORLD)  # the first one, whole
 
 
-def test_disk_full_during_output_is_a_clean_error(workdir, capsys, monkeypatch):
+@pytest.mark.parametrize("failing_row", [2, 3])
+def test_disk_full_during_output_is_a_clean_error(workdir, capsys, monkeypatch, failing_row):
+    """Rows at t = 0, 0.001 and 0.002 s, a checkpoint after the row at 0.001 s: the second row fails before any
+    checkpoint (the message said "continue from the latest checkpoint" all the same), the third after one."""
     from pdemfem.io.history import HistoryWriter
 
     rows = {"count": 0}
@@ -205,7 +208,7 @@ def test_disk_full_during_output_is_a_clean_error(workdir, capsys, monkeypatch):
 
     def full_disk(self, values):
         rows["count"] += 1
-        if rows["count"] == 2:
+        if rows["count"] == failing_row:
             raise OSError(errno.ENOSPC, "No space left on device")
         return original(self, values)
 
@@ -214,6 +217,10 @@ def test_disk_full_during_output_is_a_clean_error(workdir, capsys, monkeypatch):
     assert code == 2, err
     assert "history.csv: cannot write the output (No space left on device) at step" in err
     assert "Traceback" not in err
+    if failing_row == 2:
+        assert "the run wrote no checkpoint before the failure" in err and "--restart" not in err, err
+    else:
+        assert "continue from the last checkpoint" in err and "checkpoint_" in err, err
 
 
 def test_restart_past_time_end_says_so(workdir, capsys):

@@ -98,6 +98,7 @@ MANIFEST = "state_manifest"
 MARKER = "pdemfem_checkpoint"
 LATEST = "latest.h5"
 PREFIX = "checkpoint_"
+DIVERGED_SUFFIX = "_diverged"  # a stopped run's last state, kept for inspection: never latest.h5, never pruned
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 

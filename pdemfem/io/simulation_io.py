@@ -190,10 +190,15 @@ class SimulationIO:
         """Collective: an OutputError on every rank when any rank failed to write."""
         failure = agree_on_error(self.comm, failure)
         if failure is not None:
+            if self.last_checkpoint is not None:
+                carry_on = f"continue from the last checkpoint ({self.last_checkpoint[1]}) with --restart"
+            elif self.sim.scene.checkpoint.every:
+                carry_on = "run again: the run wrote no checkpoint before the failure"
+            else:
+                carry_on = "run again (with checkpoint.every set, a long run can continue from its last checkpoint)"
             raise OutputError(str(self.sim.output_dir / label),
                               f"cannot write the output ({failure}) at step {self.sim.step_count}",
-                              "free disk space (or write elsewhere with -o DIR); continue from the latest "
-                              "checkpoint with --restart")
+                              f"free disk space (or write elsewhere with -o DIR); {carry_on}")
 
     def particle_output_arrays(self) -> dict:
         state = self.sim.particle_system.state
@@ -220,7 +225,9 @@ class SimulationIO:
                 nodal["elastic_displacements"] = solid.displacements
         if "velocities" in wanted:
             nodal["velocities"] = solid.world_velocities
-        if "temperature" in wanted:
+        # Only where it says something: a solid that conducts, or one given a temperature (its thermal strain); the
+        # others carried a field of 293.15 K at every node and step.
+        if "temperature" in wanted and (solid.heat is not None or solid.config.temperatures()[0] is not None):
             nodal["temperature"] = solid.temperatures
         cells = {"von_mises": solid.von_mises} if "von_mises" in wanted else {}
         return layout.node_rows(nodal), layout.cell_rows(cells)
@@ -242,11 +249,16 @@ class SimulationIO:
         components[OPTIONAL_COMPONENT] = sim.surface_force_means
         return components
 
-    def write_checkpoint(self) -> Path:
+    def write_checkpoint(self, diverged: bool = False) -> Path:
         """Collective: write a checkpoint of the current step, then put the simulation into the
-        canonical state a restart from it starts with (see the module docstring)."""
+        canonical state a restart from it starts with (see the module docstring).
+
+        diverged: the state of a run the monitor stopped, kept for inspection as
+        checkpoint_<step>_diverged.h5: latest.h5 keeps pointing at the last checkpoint before it and
+        pruning (checkpoint.keep) leaves the earlier ones alone, so a restart from latest.h5 after the fix
+        does not start from the broken state, and the good checkpoints are not pushed out by it."""
         sim, comm = self.sim, self.comm
-        if self.last_checkpoint is not None and self.last_checkpoint[0] == sim.step_count:
+        if self.last_checkpoint is not None and self.last_checkpoint[0] == sim.step_count and not diverged:
             return self.last_checkpoint[1]
         self._prepare_output()
         state = {name: component.state_dict() for name, component in self.components().items()}
@@ -261,8 +273,13 @@ class SimulationIO:
             "input_files": sim.input_digests,
         }
         directory = checkpoint_directory(sim)
-        path = ckpt.write_state(ckpt.checkpoint_path(directory, sim.step_count), comm, state, attributes=attributes,
-                                keep=sim.scene.checkpoint.keep, written=self.written_checkpoints)
+        path = ckpt.checkpoint_path(directory, sim.step_count)
+        if diverged:
+            path = path.with_name(f"{path.stem}{ckpt.DIVERGED_SUFFIX}.h5")
+        path = ckpt.write_state(path, comm, state, attributes=attributes,
+                                keep=None if diverged else sim.scene.checkpoint.keep, written=self.written_checkpoints)
+        if diverged:
+            return path
         self.canonicalize()
         self.last_checkpoint = (sim.step_count, path)
         return path

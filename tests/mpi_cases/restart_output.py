@@ -1,6 +1,6 @@
 """MPI case: run restart_scenes.pile_scene with field output, dump the in-memory state.
 
-    restart_output.py OUT STEPS ELEMENT RESULT.npz
+    restart_output.py OUT STEPS ELEMENT RESULT.npz [PLATE_TEMPERATURE]
 
 Output every STEPS/2 steps; rank 0 writes the final in-memory state to RESULT.npz:
 particles sorted by id, the solid's nodes (reference coordinates, u, v, T) and cells
@@ -47,6 +47,8 @@ if __name__ == "__main__":
     comm = MPI.COMM_WORLD
     out, steps, element, result = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
     scene = restart_scenes.heated(restart_scenes.pile_scene(out, steps, steps // 2, element=element))
+    if len(sys.argv) > 5:  # the plate's initial temperature (no thermal load: the reference defaults to it)
+        scene["solids"][0]["initial_temperature"] = float(sys.argv[5])
     simulation = Simulation.from_dict(scene, comm=comm, base_dir=out)
     simulation.run(progress=False)
     data = dump(simulation)
