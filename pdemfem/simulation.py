@@ -408,8 +408,10 @@ class Simulation:
                     row[f"boundary_heat_{name}_{book}"] = value
         names = self._surface_names()
         instantaneous = [self.wall_force(name) for name in names]
-        # Before the first step of a run (or of a restart) no step has been averaged: the forces now.
-        means = self.surface_force_means.take(fallback=instantaneous)
+        # Before the first step of a run (or of a restart) no step has been averaged: the forces now.  A row off
+        # the output schedule (the end, a stop) leaves the interval running for the next scheduled row.
+        on_schedule = self.step_count % self._steps_per(self.output_interval) == 0
+        means = self.surface_force_means.take(fallback=instantaneous, restart=on_schedule)
         for name, force, mean in zip(names, instantaneous, means):
             for axis, label in enumerate("xyz"):
                 row[f"force_{name}_{label}"] = force[axis]

@@ -40,6 +40,39 @@ def test_interval_mean_repeats_and_falls_back():
     mean.add([4.0])
     assert list(mean.take(fallback=[7.0])) == [2.5]
     assert list(mean.take(fallback=[7.0])) == [2.5]  # a second row at the same step repeats the mean
+    mean.add([3.0])
+    assert list(mean.take(fallback=[7.0], restart=False)) == [3.0]  # a row off the schedule: the mean so far ...
+    mean.add([5.0])
+    assert list(mean.take(fallback=[7.0])) == [4.0]  # ... and the interval goes on to the next scheduled row
+
+
+def test_a_run_extended_past_its_old_end_has_the_uninterrupted_means(tmp_path):
+    """A run ending 3 steps past a row (time.end not a multiple of output.every), then extended by raising
+    time.end from its end checkpoint: the rows after the old end are the uninterrupted run's.  Before, the
+    old end's row started a new interval, so the next row averaged the 2 steps since it (a tester's pile:
+    -21 % of the uninterrupted mean)."""
+    steps = 4 * STEPS_PER_ROW
+    short = 2 * STEPS_PER_ROW + 3
+    uninterrupted = grains_scene(steps)
+    Simulation.from_dict(uninterrupted, base_dir=tmp_path, output_dir=tmp_path / "whole").run(progress=False)
+    first = grains_scene(short)
+    first["time"]["end"] = short * first["time"]["dt"]
+    first["output"]["every"] = uninterrupted["output"]["every"]
+    first["checkpoint"] = {"every": 1.0}  # only the one at the end
+    Simulation.from_dict(first, base_dir=tmp_path, output_dir=tmp_path / "extended").run(progress=False)
+    extended = copy.deepcopy(uninterrupted)
+    extended["checkpoint"] = first["checkpoint"]
+    Simulation.from_dict(extended, base_dir=tmp_path, output_dir=tmp_path / "extended",
+                         restart=tmp_path / "extended" / "checkpoints" / "latest.h5").run(progress=False)
+    whole = read_history(tmp_path / "whole" / "history.csv")
+    parts = read_history(tmp_path / "extended" / "history.csv")
+    assert list(parts["step"]) == sorted(list(whole["step"]) + [short])  # the old end's row stays
+    scheduled = np.isin(parts["step"], whole["step"])
+    # The same steps summed in the same order (the interval's sum is in the checkpoint): bit for bit.
+    np.testing.assert_array_equal(parts["mean_force_floor_z"][scheduled], whole["mean_force_floor_z"])
+    # The old end's row: the mean of its 3 steps since the previous row (not a copy of a scheduled one).
+    end_row = list(parts["step"]).index(short)
+    assert parts["mean_force_floor_z"][end_row] not in whole["mean_force_floor_z"]
 
 
 def test_history_forces_are_means_over_the_output_interval(tmp_path):

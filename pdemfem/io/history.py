@@ -45,7 +45,10 @@ class IntervalMean(kinds.StateComponent):
 
     `add` once per step; `take` returns the mean and starts the next interval.  Taken again with no
     step in between (two rows at one step), it repeats the last mean; before any step it returns
-    `fallback` (the value now).  A checkpoint keeps the interval so far (the same on every rank: it adds
+    `fallback` (the value now).  `take(..., restart=False)` (a row off the output schedule: the end, a
+    stop) returns the mean so far and keeps the interval going, so the next scheduled row averages its
+    whole interval: a run extended past its old end (raised time.end) read a mean over the few steps since
+    that end's row.  A checkpoint keeps the interval so far (the same on every rank: it adds
     the sums over the ranks), so the first row after a restart averages the whole interval, as the run
     without the restart did."""
 
@@ -72,9 +75,10 @@ class IntervalMean(kinds.StateComponent):
         self._steps = int(state["steps"])
         self._last = last.copy() if last.size else None
 
-    def take(self, fallback):
+    def take(self, fallback, restart: bool = True):
         if self._steps:
             self._last = self._sum / self._steps
-            self._sum[...] = 0.0
-            self._steps = 0
+            if restart:
+                self._sum[...] = 0.0
+                self._steps = 0
         return self._last if self._last is not None else np.asarray(fallback, dtype=float)
