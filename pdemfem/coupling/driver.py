@@ -161,15 +161,34 @@ class CouplingDriver(kinds.StateComponent):
                  "fem_substeps": kinds.scalar({name: int(count) for name, count in self.fem_substeps.items()})}
         if self.solids:
             state["dashpot_dissipation"] = kinds.scalar(self.dashpot_dissipation())
+            # Each rank's running sums as they stand, so that a restart on as many ranks goes on adding to the same
+            # numbers (collapsed into the total above, the books drifted from the uninterrupted run's by round-off).
+            local = np.array(self._dashpot_sums(), dtype=float)
+            by_rank = np.empty((self.comm.size, local.size))
+            self.comm.Allgather(local, by_rank)
+            state["dashpot_sums_by_rank"] = kinds.global_array(by_rank)
         return state
 
+    def _dashpot_sums(self) -> list:
+        """This rank's running sums: each surface's particle-side correction, then each solid's damper work."""
+        return ([surface.dissipation_correction_local for surface in self.surfaces]
+                + [solid.damper_work_local for solid in self.solids.values()])
+
     def load_state_dict(self, state: dict) -> None:
-        """After the solids and surfaces (which restart their rank-local dashpot sums at zero): the
-        dissipation up to the checkpoint is booked once, on rank 0's first surface."""
+        """After the solids and surfaces (which restart their rank-local dashpot sums at zero): on as many ranks
+        as the checkpoint's, each rank takes up its own running sums; otherwise the dissipation up to the
+        checkpoint is booked once, on rank 0's first surface."""
         self.steps_since_advance = int(state["steps_since_advance"])
         self.advances = int(state["advances"])
         self.fem_substeps.update({name: int(count) for name, count in state["fem_substeps"].items()})
-        if self.surfaces and self.comm.rank == 0:
+        by_rank = np.asarray(state.get("dashpot_sums_by_rank", np.zeros((0, 0))), dtype=float)
+        if by_rank.ndim == 2 and by_rank.shape == (self.comm.size, len(self._dashpot_sums())):
+            sums = by_rank[self.comm.rank]
+            for surface, value in zip(self.surfaces, sums):
+                surface.dissipation_correction_local = float(value)
+            for solid, value in zip(self.solids.values(), sums[len(self.surfaces):]):
+                solid.damper_work_local = float(value)
+        elif self.surfaces and self.comm.rank == 0:
             self.surfaces[0].dissipation_correction_local = float(state.get("dashpot_dissipation", 0.0))
 
     def refresh_surfaces(self) -> None:

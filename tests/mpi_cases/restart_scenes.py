@@ -121,6 +121,8 @@ def gather_state(simulation) -> dict | None:
             solids[f"solid:{name}:u"] = np.concatenate([r[1] for r in rows])[order]
             solids[f"solid:{name}:v"] = np.concatenate([r[2] for r in rows])[order]
     energies = simulation.energies()
+    # Part of dissipated_energy, but far below its last bit in these runs: compared on its own.
+    dashpot = simulation.coupling.dashpot_dissipation() if simulation.solids else 0.0
     heat_given = simulation.heat_given() if system.heat else {}
     heat_carried = simulation.heat_carried() if system.heat else {}
     if comm.rank != 0:
@@ -134,6 +136,7 @@ def gather_state(simulation) -> dict | None:
     records = np.concatenate(records)
     result["contact_records"] = records[np.lexsort((records[:, 1], records[:, 0]))]
     result["energies"] = np.array([energies[k] for k in sorted(energies)])
+    result["dashpot_dissipation"] = np.array([dashpot])
     result["scalars"] = np.array([simulation.step_count, system.lost_particles, simulation.time])
     if system.heat:
         result["heat_given"] = np.array(list(heat_given.values()))
