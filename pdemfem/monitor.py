@@ -79,7 +79,7 @@ def total_energy(energies: dict) -> float:
             + energies.get("solid_kinetic_energy", 0.0) + energies.get("solid_strain_energy", 0.0)
             + energies.get("solid_load_potential", 0.0) - energies.get("thermoelastic_work", 0.0)
             - energies.get("stream_energy", 0.0) - energies.get("frame_work", 0.0)
-            - energies.get("support_work", 0.0))
+            - energies.get("support_work", 0.0) + energies.get("lost_energy", 0.0))
 
 
 # Heat content (m c T, relative to 0 K) is orders of magnitude above the mechanical energies and

@@ -372,6 +372,8 @@ class Simulation:
             columns += ["frame_work"]
         if self._free_axle_solids():
             columns += ["axle_energy"]
+        if self.particle_system.removes_leaving:
+            columns += ["lost_energy"]
         if self.particle_system.heat:
             columns += ["thermal_energy", "particle_thermal_energy"]
             columns += [f"heat_{name}" for name in self.particle_system.heat_ledger.names]
@@ -527,6 +529,9 @@ class Simulation:
             # elastic motion, and through their surfaces on the particles.
             energies["frame_work"] = (sum(solid.frame_work for solid in self.solids.values())
                                       + sum(surface.frame_work() for surface in self.coupled_surfaces))
+        if self.particle_system.removes_leaving:
+            # Energy the particles the domain box removed carried out (as an outlet's, in stream_energy).
+            energies["lost_energy"] = self.particle_system.lost_energy
         if self._free_axle_solids():
             # A free axis's own kinetic and potential energy (the particles' work on it is in frame_work).
             energies["axle_energy"] = sum(self.solids[name].frame.axle_energy(self.solids[name].gravity[2])

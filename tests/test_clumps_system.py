@@ -186,12 +186,18 @@ def test_a_clump_leaving_the_domain_is_removed_whole(tmp_path):
     data = scene([group], {"model": "hertz_mindlin", "restitution": 0.5}, gravity=(0, 0, 0), walls=False,
                  domain={"box": [[-4e-3, -4e-3, -4e-3], [4e-3, 4e-3, 8e-3]]})
     sim = build(data, tmp_path)
+    start = sim.total_energy()
+    leaving = 0.5 * sim.clumps.masses[0] * 2.0 ** 2
     for _ in range(200):
         sim.step(20)
         if sim.clumps.ids.size == 1:
             break
     assert list(sim.clumps.ids) == [1]
     assert sim.particle_count() == 2 and sim.particle_system.lost_particles == 2
+    # It took its body's kinetic energy out, booked in lost_energy: the total stays (to round-off of its sum).
+    energies = sim.energies()
+    assert energies["lost_energy"] == pytest.approx(leaving, rel=1e-12)
+    assert sim.total_energy() == pytest.approx(start, rel=1e-12)
     np.testing.assert_allclose(np.sort(sim.particles.positions[:, 0]), [-RADIUS, RADIUS], atol=1e-15)
     body = sim.particle_system.state.fields[BODY_FIELD]
     assert list(body[:sim.particle_system.state.owned_count]) == [1, 1]  # the body id

@@ -340,20 +340,33 @@ class ClumpBodies(kinds.StateComponent):
         return quaternion_products(self.orientations, quaternion_conjugates(self.principal_orientations))
 
     # ------------------------------------------------------------------ removal
-    def remove_leaving(self, state, outside: np.ndarray) -> np.ndarray:
-        """`outside` (owned rows leaving) grown to every member of a body one of whose members leaves;
-        those bodies are dropped and the remaining members' body indices renumbered."""
+    def remove_leaving(self, state, outside: np.ndarray, gravity, half_dt: float) -> tuple:
+        """(`outside` (owned rows leaving) grown to every member of a body one of whose members leaves, the
+        kinetic + rotational + potential energy [J] those bodies carry out (the finite ones), at the end of the
+        step: the rebuild comes at the half step, so the second half kick is completed with the last loads, as
+        pdemfem.particles.energy.energy_leaving does for spheres); those bodies are dropped and the remaining
+        members' body indices renumbered."""
         self._refuse_pending_kick("a list rebuild")  # (every rebuild passes here first)
         body = state.fields[BODY_FIELD][:state.owned_count]
         leaving = np.unique(body[outside & (body >= 0)])
         if not len(leaving):
-            return outside
+            return outside, 0.0
         outside = outside | np.isin(body, leaving)
         gone = np.isin(self.ids, leaving)
+        rows = np.flatnonzero(gone)
+        spins = np.zeros(len(rows))
+        gravity = np.asarray(gravity, dtype=float)
+        velocities = self.velocities[rows] + half_dt * (self.forces[rows] / self.masses[rows, None] + gravity)
+        momenta = self.angular_momenta[rows] + half_dt * self.torques[rows]
+        rotational_energies(len(rows), np.ascontiguousarray(self.orientations[rows]), np.ascontiguousarray(momenta),
+                            np.ascontiguousarray(self.principal_moments[rows]), spins)
+        energies = (0.5 * self.masses[rows] * np.einsum("ij,ij->i", velocities, velocities)
+                    + spins - self.masses[rows] * (self.positions[rows] @ gravity))
+        carried = float(np.sum(energies[np.isfinite(energies)]))
         self._keep(np.flatnonzero(~gone))
         self.lost += int(gone.sum())
         self._derive()
-        return outside
+        return outside, carried
 
     # ------------------------------------------------------------------ checkpoints
     _STORED = ("ids", "group_index", "positions", "orientations", "velocities", "angular_momenta", "masses",

@@ -18,7 +18,7 @@ import numpy as np
 from mpi4py import MPI
 
 from pdemfem import state_dict as kinds
-from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
+from pdemfem.particles.energy import energy_leaving
 
 
 class Outlets(kinds.StateComponent):
@@ -56,9 +56,10 @@ class Outlets(kinds.StateComponent):
         lower, upper = self.boxes[index]
         return np.all((positions >= lower) & (positions <= upper), axis=1)
 
-    def take(self, state, eligible: np.ndarray, gravity, comm) -> np.ndarray:
+    def take(self, state, eligible: np.ndarray, gravity, comm, half_dt: float = 0.0) -> np.ndarray:
         """Collective: the mask of the owned particles (among `eligible`) an outlet takes; adds them
-        to the outlets' totals (summed over the ranks).  The caller removes them."""
+        to the outlets' totals (summed over the ranks), their energy at the end of the step (energy_leaving,
+        half_dt: half the step).  The caller removes them."""
         owned = state.owned_count
         positions = state.positions[:owned]
         taken = np.zeros(owned, dtype=bool)
@@ -68,13 +69,10 @@ class Outlets(kinds.StateComponent):
             outlet[new] = index
             taken |= new
         rows = np.flatnonzero(taken)
-        kinetic, rotational, potential, _ = particle_energy_sums(
-            len(rows), state.mass[rows], state.velocities[rows], state.angular_velocities[rows],
-            state.inverse_inertia[rows], state.positions[rows], np.asarray(gravity, dtype=float), NO_CLUMP_BODIES)
         count = len(self.names)
         totals = np.concatenate([np.bincount(outlet[rows], minlength=count).astype(float),
                                  np.bincount(outlet[rows], weights=state.mass[rows], minlength=count),
-                                 [kinetic + rotational + potential]])
+                                 [energy_leaving(state, rows, gravity, half_dt)]])
         if comm.size > 1:
             comm.Allreduce(MPI.IN_PLACE, totals, op=MPI.SUM)
         self.counts += np.rint(totals[:count]).astype(np.int64)

@@ -49,7 +49,7 @@ from pdemfem.neighbors.verlet import VerletList
 from pdemfem.parallel.decomposition import Decomposition, add_pair_costs, recursive_bisection, touching_pair_ends
 from pdemfem.parallel.exchange import GhostExchange, migrate
 from pdemfem.parallel.reductions import StepReductions
-from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
+from pdemfem.particles.energy import NO_CLUMP_BODIES, energy_leaving, particle_energy_sums
 from pdemfem.particles.heat import (NO_HEAT_FLOWS, NO_TEMPERATURES, CarriedHeat, HeatLedger, heat_content,
                                     update_temperatures)
 from pdemfem.particles.integrate import kick, kick_drift, outside_domain
@@ -128,6 +128,7 @@ class ParticleSystem(kinds.StateComponent):
         # its checks).
         self.deepest_overlaps = np.zeros(3)
         self.lost_particles = 0
+        self.lost_energy = 0.0  # kinetic + rotational + potential energy the domain box's removals took out [J]
         self.nonfinite_particles = 0  # of lost_particles: removed because a position became inf/NaN
         self.largest_displacement = 0.0  # of an owned particle since the last list build, after the last drift
         self.fastest_speed = 0.0  # largest particle speed at the last energies() call
@@ -267,6 +268,7 @@ class ParticleSystem(kinds.StateComponent):
                             "elastic_energy": kinds.scalar(float(self.elastic_energy)),
                             "contact_count": kinds.scalar(int(self.contact_count)),
                             "lost_particles": kinds.scalar(int(self.lost_particles)),
+                            "lost_energy": kinds.scalar(float(self.lost_energy)),
                             "rebalances": kinds.scalar(int(self.rebalances))}
         if self.heat:
             result["totals"]["heat_given"] = kinds.global_array(self.heat_ledger.settle(self.comm))
@@ -298,6 +300,7 @@ class ParticleSystem(kinds.StateComponent):
         self.elastic_energy = float(totals["elastic_energy"])
         self.contact_count = int(totals["contact_count"])
         self.lost_particles = int(totals["lost_particles"])
+        self.lost_energy = float(totals.get("lost_energy", 0.0))  # (checkpoints before it was booked: none)
         self.rebalances = int(totals["rebalances"])
         if self.heat:
             if "heat_given" not in totals:
@@ -476,22 +479,40 @@ class ParticleSystem(kinds.StateComponent):
         bounded = np.isfinite(self.domain_lower) & (self.periodic_lengths == 0)
         outside, nonfinite = outside_domain(state.owned_count, state.positions, self.domain_lower,
                                             self.domain_upper, bounded)
+        carried = self._energy_carried_out(outside)
         if self.clumps is not None:  # a clump goes whole (counted as its member spheres)
-            outside = self.clumps.remove_leaving(state, outside)
-        counts = np.array([np.count_nonzero(outside), nonfinite])
+            outside, body_energy = self.clumps.remove_leaving(state, outside, self.gravity, 0.5 * self.dt)
+            carried += body_energy
+        totals = np.array([np.count_nonzero(outside), nonfinite, carried], dtype=float)
         if self.comm.size > 1:
-            self.comm.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
-        lost, nonfinite = int(counts[0]), int(counts[1])
+            self.comm.Allreduce(MPI.IN_PLACE, totals, op=MPI.SUM)
+        lost, nonfinite = int(round(totals[0])), int(round(totals[1]))
         if lost:
             self.lost_particles += lost
             self.nonfinite_particles += nonfinite
+            self.lost_energy += float(totals[2])
         if self.outlets is not None:  # particles an outlet takes are counted there (collective)
-            outside |= self.outlets.take(state, ~outside, self.gravity, self.comm)
+            outside |= self.outlets.take(state, ~outside, self.gravity, self.comm, 0.5 * self.dt)
         if np.any(outside):
             if self.heat:
                 self.carried_heat.book_out(self._heat_content_of(np.flatnonzero(outside)))
             state.keep(np.flatnonzero(~outside))
         return ~outside
+
+    @property
+    def removes_leaving(self) -> bool:
+        """Whether the domain box bounds an axis that is not periodic (particles beyond it are removed)."""
+        return bool(np.any(np.isfinite(self.domain_lower) & (self.periodic_lengths == 0)))
+
+    def _energy_carried_out(self, outside: np.ndarray) -> float:
+        """The energy the free spheres among the owned rows `outside` carry out (energy_leaving; a clump's is its
+        body's: Clumps.remove_leaving)."""
+        leaving = outside
+        if self.clumps is not None:
+            from pdemfem.clumps.bodies import BODY_FIELD
+
+            leaving = outside & (self.state.fields[BODY_FIELD][:self.state.owned_count] < 0)
+        return energy_leaving(self.state, np.flatnonzero(leaving), self.gravity, 0.5 * self.dt)
 
     def _heat_content_of(self, rows: np.ndarray) -> float:
         """m c T [J] of the given rows, each particle's term as heat_content (thermal_energy) takes it."""
