@@ -314,6 +314,12 @@ class _Picture:
         solid_names = [name for name in solid_names if (outdir / f"{name}.h5").is_file()]
         surfaces = [_solid_surface(outdir / f"{name}.h5") for name in solid_names]
         if not len(positions) and not surfaces:
+            if time is not None:  # the series is there; its last step holds no particle
+                raise PdemfemError(str(particles_file), f"its last output step (t = {time:.6g} s) holds no particles "
+                                                        f"(they left the domain or an outlet took them) and the run "
+                                                        f"has no solid series to draw",
+                                   "look at an earlier step in ParaView (particles.xdmf), or let the run end before "
+                                   "the particles leave")
             raise PdemfemError(str(outdir), "no particles.h5 or solid series to draw",
                                "run with output.particles (positions, radii) or solids in the scene")
 

@@ -2,6 +2,14 @@
 bookkeeping total stays flat across the removals."""
 from __future__ import annotations
 
+import json
+import os
+import shutil
+import subprocess
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import h5py
 import numpy as np
 import pytest
 
@@ -60,3 +68,30 @@ def test_the_energy_an_outlet_takes_is_booked_at_the_end_of_the_step(tmp_path):
     scale = np.abs(history["kinetic_energy"]).max() + np.abs(history["potential_energy"]).max()
     assert np.abs(total - total[0]).max() < 1e-12 * scale  # as above
     assert abs(history["stream_energy"][-1]) > 0.1 * scale
+
+
+def test_steps_without_particles_stay_in_the_particle_series(tmp_path):
+    """Once every particle has left, particles.xdmf left the empty steps out: ParaView's time range ended at the
+    last step with particles, and beside a solid's series the particles hung there to the end of the run.  Each
+    step is indexed now, an empty one as a grid with its time alone."""
+    scene = falling_scene(0.001)
+    scene["output"] = {"every": 0.02, "particles": ["positions", "radii", "velocities"]}
+    Simulation.from_dict(scene, output_dir=tmp_path).run(progress=False)
+    history = read_history(tmp_path / "history.csv")
+    with h5py.File(tmp_path / "particles.h5", "r") as handle:
+        counts = [int(handle[name].attrs["count"]) for name in sorted(handle) if name.startswith("step_")]
+    assert counts[-1] == 0 and counts[0] == 25
+    grids = ET.parse(tmp_path / "particles.xdmf").getroot().find("Domain/Grid").findall("Grid")
+    np.testing.assert_array_equal([float(grid.find("Time").get("Value")) for grid in grids], history["time"])
+    pvpython = shutil.which("pvpython")
+    if pvpython is None:
+        return  # ParaView itself (Debian package paraview) reads the series below when installed
+    environment = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+    environment.setdefault("QT_QPA_PLATFORM", "offscreen")
+    script = Path(__file__).parent / "mpi_cases" / "io_paraview.py"
+    completed = subprocess.run([pvpython, str(script), str((tmp_path / "particles.xdmf").resolve())],
+                               capture_output=True, text=True, timeout=180, env=environment)
+    assert completed.returncode == 0, completed.stderr[-2000:]
+    (seen,) = [json.loads(line) for line in completed.stdout.splitlines() if line.startswith("{")]
+    assert seen["points"] == counts
+    np.testing.assert_allclose(seen["times"], history["time"], rtol=1e-15)

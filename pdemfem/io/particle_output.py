@@ -205,8 +205,6 @@ class ParticleOutput:
             self._grid_texts, self._texts_connectivity = {}, self._connectivity_length
         grids = []
         for entry in self._entries:
-            if entry["count"] == 0:  # nothing to draw; ParaView rejects zero-size items
-                continue
             text = self._grid_texts.get(entry["step"])
             if text is None:
                 text = self._grid_texts[entry["step"]] = self._grid(entry)
@@ -217,6 +215,11 @@ class ParticleOutput:
         """One step's grid of the index: the points (a polyvertex over the shared connectivity) and their fields."""
         h5_name, count = self.h5_path.name, entry["count"]
         group = "/" + step_group(entry["step"])
+        if count == 0:
+            # A step without particles (all left, none inserted yet) is a grid with its time alone: ParaView's Xdmf3
+            # reader aborts on a zero-size data item, and a step left out of the index showed the last particles
+            # frozen until the end of the run.
+            return xdmf.uniform_grid(group[1:], entry["time"], [])
         parts = [
             '<Topology TopologyType="Polyvertex" NumberOfElements="%d" NodesPerElement="1">%s</Topology>'
             % (count, xdmf.hyperslab_item(h5_name, CONNECTIVITY, 0, count, self._connectivity_length, np.int64)),
