@@ -97,6 +97,18 @@ def test_changed_particle_count_is_refused_even_with_force(finished, tmp_path, c
     assert not (tmp_path / "o").exists()
 
 
+def test_another_scenes_checkpoint_is_refused_first_for_what_no_edit_fixes(finished, tmp_path, capsys):
+    """--force from another scene's checkpoint: the refusals time.end and dt can lift came first, so a user
+    raised time.end, then set dt, and only then learnt that the particles were another scene's."""
+    latest = finished / "results" / "checkpoints" / "latest.h5"
+    other = tmp_path / "other.yaml"
+    # At the checkpoint's time.end, another step and 18 grains: the particle count is named first.
+    other.write_text(SCENE.replace("count: 20", "count: 18").replace("dt: auto, dt_factor: 0.1", "dt: 1.0e-6"))
+    code, _, err = run(capsys, "run", other, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
+    assert code == 2, err
+    assert "holds the 20 particles" in err and "nothing left to run" not in err and "time.dt" not in err, err
+
+
 @pytest.mark.parametrize("change", ["moved", "added"])
 def test_changed_walls_are_refused_even_with_force(finished, tmp_path, capsys, change):
     """The walls' positions and motion are stored state, restored by their place in the list: a moved floor

@@ -299,6 +299,12 @@ class SimulationIO:
         attributes = checkpoint.attributes
         where = str(checkpoint.path)
         step = int(attributes["step"])
+        # What no edit of time.end or dt can fix first: another scene's particles or solids.
+        changes = self._changes(attributes)
+        self._refuse_other_particles(where, attributes, changes, force)
+        if sorted(attributes.get("solids", [])) != sorted(sim.solids):
+            raise CheckpointError(where, f"holds solids {attributes.get('solids')}, the scene has {list(sim.solids)}",
+                                  "restart with the scene that wrote the checkpoint")
         total_steps = int(math.ceil(sim.scene.time.end / sim.dt - 1e-9))  # as Simulation.run
         if step >= total_steps:
             raise CheckpointError(where, f"was written at step {step} (t = {step * sim.dt:.6g} s), at or past "
@@ -314,13 +320,8 @@ class SimulationIO:
                        f"part of the stored state (step counts, velocities at half steps), so a restart keeps it",
                 f"set time.dt: {stored!r} in the scene (the checkpoint's step, exactly; with --force, since time.dt "
                 f"is physics), or start afresh without --restart")
-        changes = self._changes(attributes)
         self._refuse_changed_input_files(where, attributes, force)
-        self._refuse_other_particles(where, attributes, changes, force)
         self._refuse_replacing_other_physics(step)
-        if sorted(attributes.get("solids", [])) != sorted(sim.solids):
-            raise CheckpointError(where, f"holds solids {attributes.get('solids')}, the scene has {list(sim.solids)}",
-                                  "restart with the scene that wrote the checkpoint")
         fix = "restart with the scene (walls, solids) that wrote the checkpoint"
         components = self.components()
         if OPTIONAL_COMPONENT not in state:  # an older version's checkpoint: the first row averages from the restart
@@ -395,7 +396,9 @@ class SimulationIO:
         if not isinstance(stored, dict):
             return
         current = self.sim.input_digests
-        changed = sorted(key for key in set(stored) | set(current) if stored.get(key) != current.get(key))
+        # Files of one scene only (a solid or wall added or removed) are a change of the scene's structure, which the
+        # structure checks name: "changed since" would mislead there.
+        changed = sorted(key for key in set(stored) & set(current) if stored[key] != current[key])
         if not changed:
             return
         walls = [key for key in changed if key.startswith("walls")]
