@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import inspect
+import logging
 import math
 import os
 import re
@@ -46,6 +47,28 @@ from pdemfem.errors import PdemfemError, SceneError
 __all__ = ["main", "build_parser"]
 
 ERROR_SYNC_SECONDS = float(os.environ.get("PDEMFEM_ERROR_SYNC_SECONDS", "30"))
+
+
+class _LoggedToStderr(logging.Handler):
+    """The package's run-time messages on stderr as `warning: ...` (as run prints check's warnings; a message
+    that names its kind, `note: ...`, as it is).  Python's fallback printed them bare.  sys.stderr is looked up
+    at each message, so a redirected stderr receives them."""
+
+    def emit(self, record) -> None:
+        try:
+            text = self.format(record)
+            if not text.startswith(("note:", "warning:", "error:")):
+                text = f"{record.levelname.lower()}: {text}"
+            print(text, file=sys.stderr, flush=True)
+        except Exception:  # as logging's own handlers: a failing message never stops the run
+            self.handleError(record)
+
+
+def _log_to_stderr() -> None:
+    logger = logging.getLogger("pdemfem")
+    if not any(isinstance(handler, _LoggedToStderr) for handler in logger.handlers):
+        handler = _LoggedToStderr(logging.WARNING)
+        logger.addHandler(handler)
 
 
 # --------------------------------------------------------------------------- parser
@@ -125,6 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[List[str]] = None) -> int:
     """Run the command line; returns the exit code (the console script exits with it)."""
     parser = build_parser()
+    _log_to_stderr()
     arguments, unknown = parser.parse_known_args(argv)
     petsc_options, rest = split_petsc_options(unknown)
     if rest:

@@ -495,6 +495,8 @@ class Simulation:
             if wall.name == name:
                 return wall.force
         walls = self.particle_system.walls
+        if name not in walls.names:
+            raise KeyError(_unknown_name(name, "wall or contact solid", self._surface_names()))
         return walls.forces[walls.index(name)].copy()
 
     def wall_torque(self, name: str, about=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -503,7 +505,8 @@ class Simulation:
         for wall in self.contributor_walls:
             if wall.name == name:
                 return wall.torque(about)
-        self.particle_system.walls.index(name)  # KeyError naming the walls when unknown
+        if name not in self.particle_system.walls.names:
+            raise KeyError(_unknown_name(name, "wall or contact solid", self._surface_names()))
         raise ValueError(f"wall_torque: wall '{name}' is a plane; torques are reported for mesh and cylinder walls")
 
     def contact_count(self) -> int:
@@ -619,7 +622,18 @@ class Simulation:
 
     def solid_reaction(self, solid: str, group: str) -> np.ndarray:
         """Total reaction force of a solid's support group (summed over ranks)."""
+        if solid not in self.solids:
+            raise KeyError(_unknown_name(solid, "solid", list(self.solids)))
         return self.solids[solid].reaction(group)
+
+
+def _unknown_name(name: str, kind: str, known: list) -> str:
+    """The message of a KeyError for a name the scene does not have: the known names, and the closest one."""
+    import difflib
+
+    close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+    return (f"no {kind} named '{name}'" + (f"; did you mean '{close[0]}'?" if close else "")
+            + f" (this scene's: {', '.join(known) if known else 'none'})")
 
 
 def _progress_bar(total_steps: int, done_steps: int, enabled: bool):

@@ -215,3 +215,14 @@ def test_sub_cycling_error_converges_as_fem_every_goes_to_one(tmp_path, element)
             assert 2 * errors[2][which] < errors[5][which] < 8 * errors[2][which]
         # P2: the face's midside nodes add surface modes whose phase the sub-cycling shifts, so the errors need
         # not be monotone in k (measured 6-8e-4 at k = 2, 4.7-5.4e-3 at k = 5); only the bound is asserted.
+
+
+def test_a_misspelt_surface_or_solid_name_lists_the_scenes_names(tmp_path):
+    """wall_force('blok') on a scene whose only surface is the contact solid 'block' said "walls: []", and
+    solid_reaction with a misspelt solid raised a bare KeyError('blok')."""
+    sim = Simulation.from_dict(ball_on_block(dt=1e-4, cells=(1, 1, 1)), output_dir=str(tmp_path))
+    for query in (lambda: sim.wall_force("blok"), lambda: sim.wall_torque("blok"),
+                  lambda: sim.solid_reaction("blok", "zmin")):
+        with pytest.raises(KeyError) as unknown:
+            query()
+        assert "did you mean 'block'?" in str(unknown.value) and "block" in str(unknown.value)

@@ -272,6 +272,19 @@ def test_rayleigh_time_and_time_step():
     assert derived.time_step(fixed) == 1e-6
 
 
+def test_an_end_shorter_than_one_step_of_dt_auto_is_refused_as_an_explicit_dt_is():
+    """time.end 1e-9 s with dt auto: the run took one whole step (1.4e-5 s, 13,946 x the end) and wrote it as the
+    end; an explicit dt above end was refused when the scene was read."""
+    scene, _ = load_scene(base_scene())
+    dt = derived.time_step(scene)
+    short, _ = load_scene(modified(lambda s: s["time"].update(end=0.5 * dt)))
+    with pytest.raises(SceneError, match="time.end") as refused:
+        derived.time_step(short)
+    assert f"raise time.end to at least {dt:.3g} s" in str(refused.value)
+    exact, _ = load_scene(modified(lambda s: s["time"].update(end=dt)))
+    assert derived.time_step(exact) == dt  # one whole step fits
+
+
 def test_auto_dt_without_particles_is_a_scene_error():
     scene, _ = load_scene(modified(lambda s: s.update(particles=[])))
     with pytest.raises(SceneError, match="time.dt"):

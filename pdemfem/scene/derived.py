@@ -335,7 +335,12 @@ def time_step(scene: Scene, solid_critical_step: Optional[float] = None, base_di
     solids here (on this process only)."""
     if (scene.time.dt == "auto" and solid_critical_step is None and not scene.particles and scene.solids):
         solid_critical_step = solids_critical_step(scene, base_dir)
-    return time_step_choice(scene, solid_critical_step)[0]
+    dt, why = time_step_choice(scene, solid_critical_step)
+    if dt > scene.time.end:  # (an explicit time.dt above end is refused when the scene is read)
+        raise SceneError("time.end", f"{scene.time.end:g} s is shorter than one step of dt auto ({dt:.3g} s, from the "
+                                     f"{why}): the run could not take one step of it (it ran one whole step past the end)",
+                         f"raise time.end to at least {dt:.3g} s, or give a time.dt below time.end")
+    return dt
 
 
 def solids_critical_step(scene: Scene, base_dir=None) -> Optional[float]:
@@ -809,7 +814,8 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
     steps = scene.time.end / dt
     every = scene.output.every
     if every is not None and every > scene.time.end:
-        found.append(f"output.every = {every:g} s is longer than time.end = {scene.time.end:g} s: only the start is written")
+        found.append(f"output.every = {every:g} s is longer than time.end = {scene.time.end:g} s: only the start and "
+                     f"the end are written")
     if every is not None and every < dt:
         found.append(f"output.every = {every:g} s is shorter than dt = {dt:.3g} s: one output per step")
     if steps > 1e7:
