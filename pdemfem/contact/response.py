@@ -67,6 +67,36 @@ def clear_history(composition, history, row):
 
 
 @njit(inline="always", cache=True)
+def dashpot_onset(overlap, approach_rate, elastic_force, normal_stiffness, dt):
+    """The factor on the dashpots at a contact's first evaluation: the mean dashpot force of the continuous
+    contact over the time the step's force stands for, over the dashpot now.
+
+    A dashpot's force jumps at first touch, so a step that applies it for a whole step misses the continuous
+    contact's impulse by up to half a step of it, by where in the step the contact began: the restitution of
+    single impacts at dt auto scattered by -3.0..+1.4 % (linear law, e = 0.5, 33 steps per contact; -1.1..+0.4 %
+    Hertz), first order in dt.  The bodies close at a constant rate over the step (the drift), so the contact
+    began tau = overlap / approach before this evaluation (tau <= dt: the last one saw none); velocity Verlet's
+    force here stands for [t - dt/2, t + dt/2] and the one before, which saw no contact, for the window before,
+    so the continuous dashpot's impulse over both, with c ~ overlap^p (p = 0 linear, 1/4 Hertz: c ~ sqrt(S_n)),
+    is c(overlap) approach (tau + dt/2)^(p+1) / ((p + 1) tau^p).  p comes from the elastic law itself:
+    S_n overlap / F = 1 + 2p for F ~ overlap^(1 + 2p).  Later evaluations (tau > dt), receding or
+    adhesive contacts get 1.  The clamped force law ends with a force that falls to zero continuously: no
+    factor is needed there."""
+    if approach_rate <= 0.0 or overlap <= 0.0 or elastic_force <= 0.0 or overlap >= approach_rate * dt:
+        return 1.0
+    exponent = 0.5 * (normal_stiffness * overlap / elastic_force - 1.0)
+    if exponent < 0.0:
+        exponent = 0.0
+    elif exponent > 0.25:
+        exponent = 0.25
+    began = overlap / approach_rate
+    window = began + 0.5 * dt
+    if exponent == 0.0:
+        return window / dt
+    return window * (window / began) ** exponent / ((1.0 + exponent) * dt)
+
+
+@njit(inline="always", cache=True)
 def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, vy, vz, previous_vx, previous_vy,
                      previous_vz, wx, wy, wz, effective_mass, effective_radius, effective_inertia, rolling_inertia, history, row,
                      dt):
@@ -91,7 +121,8 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
     normal_speed = vx * nx + vy * ny + vz * nz
     approach_rate = -normal_speed
     gamma = coefficients[a, b, DAMPING]
-    normal_damping = dashpot(gamma, effective_mass, normal_stiffness)
+    onset = dashpot_onset(overlap, approach_rate, elastic_force, normal_stiffness, dt)
+    normal_damping = onset * dashpot(gamma, effective_mass, normal_stiffness)
     normal_force = elastic_force + normal_damping * approach_rate
     floor = min(elastic_force, 0.0)
     if normal_force < floor:
@@ -118,7 +149,7 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
             load = normal_force
             if composition & COHESIVE:
                 load += normal_friction_offset(model, composition, coefficients, a, b, effective_radius)
-            tangential_damping = dashpot(gamma, effective_mass, tangential_stiffness)
+            tangential_damping = onset * dashpot(gamma, effective_mass, tangential_stiffness)
             tx, ty, tz, tangential_damping, spring_energy, tangential_dissipated = tangential_mindlin.force(
                 nx, ny, nz, vx, vy, vz, normal_speed, previous_vx, previous_vy, previous_vz, tangential_stiffness,
                 tangential_damping, friction * max(load, 0.0), history, row, tangential_column, dt)
