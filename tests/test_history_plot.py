@@ -151,3 +151,14 @@ def test_is_constant_ignores_last_bit_noise_only():
     assert is_constant(np.array([0.1 + 0.2, 0.3]))
     assert not is_constant(np.array([1.0, 1.0 + 1e-9]))
     assert is_constant(np.zeros(3))
+
+
+def test_run_after_steps_taken_through_the_api_writes_the_state_it_starts_from(tmp_path):
+    """sim.step(n) then sim.run(): history.csv began at the first scheduled row after step n, without the state
+    the run started from."""
+    steps = 4 * STEPS_PER_ROW
+    sim = Simulation.from_dict(grains_scene(steps), base_dir=tmp_path, output_dir=tmp_path / "run")
+    sim.step(3)
+    sim.run(progress=False)
+    history = read_history(tmp_path / "run" / "history.csv")
+    assert list(history["step"]) == [3] + list(range(STEPS_PER_ROW, steps + 1, STEPS_PER_ROW))
