@@ -292,10 +292,9 @@ def markdown(results: dict) -> str:
 
 
 def plot(results: dict, path: Path) -> None:
-    import matplotlib
+    from pdemfem.plot import agg_pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = agg_pyplot()
 
     quantities = (("rebound", "rebound / reference"), ("duration", "duration / reference"),
                   ("peak_force", "peak force / reference"))

@@ -432,9 +432,9 @@ def main(argv=None) -> int:
 
 
 def plot(results: dict, folder: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from pdemfem.plot import agg_pyplot
+
+    plt = agg_pyplot()
     folder.mkdir(parents=True, exist_ok=True)
     diameter = results["diameter"]
     closed = results["closed"]

@@ -552,10 +552,9 @@ def print_table(mode: str, rows: list) -> None:
 
 
 def plot(results: dict, path: Path) -> None:
-    import matplotlib
+    from pdemfem.plot import agg_pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = agg_pyplot()
 
     studies = [mode for mode in ("strong", "weak") if mode in results]
     figure, axes = plt.subplots(1, 2, figsize=(10, 4))

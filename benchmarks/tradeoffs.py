@@ -571,10 +571,9 @@ def knob_fem_every(settings: dict, log) -> dict:
 # ============================================================================= plots
 def draw(results: dict, folder: Path) -> list:
     """Error against cost, one figure per family of knobs: docs/img/tradeoffs_{dem,fem,cost}.png."""
-    import matplotlib
+    from pdemfem.plot import agg_pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = agg_pyplot()
 
     knobs = results["knobs"]
     folder.mkdir(parents=True, exist_ok=True)

@@ -122,11 +122,8 @@ def _constant_note(data, columns, unit: str) -> str:
     return f"constant: {shown}{more}"
 
 
-def plot_history(outdir) -> List[Path]:
-    """Draw OUTDIR/history.csv into OUTDIR/plots/*.png; returns the files written."""
-    outdir = Path(outdir)
-    data = read_history(outdir / "history.csv")
-
+def agg_pyplot():
+    """matplotlib's pyplot on the Agg backend (no display needed), for the plots and the benchmarks' figures."""
     import warnings
 
     import matplotlib
@@ -140,7 +137,15 @@ def plot_history(outdir) -> List[Path]:
         warnings.simplefilter("ignore", UserWarning)
         _prefer_the_toolkit_beside(matplotlib)
         from matplotlib import pyplot
+    return pyplot
 
+
+def plot_history(outdir) -> List[Path]:
+    """Draw OUTDIR/history.csv into OUTDIR/plots/*.png; returns the files written."""
+    outdir = Path(outdir)
+    data = read_history(outdir / "history.csv")
+
+    pyplot = agg_pyplot()
     plots = outdir / "plots"
     plots.mkdir(exist_ok=True)
     time = data["time"]
