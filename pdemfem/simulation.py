@@ -351,7 +351,8 @@ class Simulation:
             earlier = self.io.last_checkpoint
             restart = (f"the last checkpoint before it is {earlier[1]} (step {earlier[0]}; latest.h5 is not moved "
                        f"to the stopped state): continue from it with --restart once fixed" if earlier is not None else
-                       "there is no checkpoint before it: run again once fixed")
+                       "there is no checkpoint before it: run again with --force once fixed (it starts afresh, "
+                       "replacing this run's outputs and the stopped state)")
             raise SolverError(error.where, f"{error.problem}\n  the state at the stop is kept for inspection in "
                                            f"{path}; {restart}", error.fix) from None
 

@@ -109,3 +109,29 @@ def test_the_stopped_state_does_not_become_latest_nor_push_out_the_good_checkpoi
     # The good checkpoint restarts (the scene unchanged, so it diverges again, from the good state).
     with pytest.raises(SolverError):
         Simulation.from_dict(scene, output_dir=tmp_path, restart=folder / "latest.h5").run(progress=False)
+
+
+def test_a_run_that_stopped_before_its_first_checkpoint_runs_again_with_force(tmp_path):
+    """It left only the stopped state (checkpoint_<step>_diverged.h5) and said "run again once fixed", but the
+    output guard took that file for a checkpoint to continue and refused the new run even with --force (and a
+    --restart of the folder found no latest.h5)."""
+    import pytest
+
+    from pdemfem import Simulation
+    from pdemfem.errors import OutputError, SolverError
+
+    scene = _grains_dict(heated=True, capacity=1e-30)
+    scene["time"]["end"] = 0.02
+    scene["checkpoint"] = {"every": 0.015}  # the temperatures blow up at t = 0.0144 s, before it
+    with pytest.raises(SolverError) as stopped:
+        Simulation.from_dict(scene, output_dir=tmp_path).run(progress=False)
+    assert "run again with --force once fixed" in str(stopped.value)
+    fixed = _grains_dict(heated=True, capacity=800.0)
+    fixed["time"]["end"] = 0.002
+    fixed["checkpoint"] = {"every": 0.001}
+    with pytest.raises(OutputError) as refused:
+        Simulation.from_dict(fixed, output_dir=tmp_path).run(progress=False)
+    assert "_diverged.h5" in str(refused.value) and "--force" in str(refused.value)
+    Simulation.from_dict(fixed, output_dir=tmp_path, force=True).run(progress=False)
+    folder = tmp_path / "checkpoints"
+    assert not list(folder.glob("*_diverged.h5")) and (folder / "latest.h5").is_file()

@@ -84,7 +84,7 @@ from numba import njit
 from pdemfem import state_dict as kinds
 from pdemfem.errors import CheckpointError
 from pdemfem.io import xdmf
-from pdemfem.io.output_guard import agree_on_error, write_error_text
+from pdemfem.io.output_guard import DIVERGED_SUFFIX, agree_on_error, write_error_text
 
 # 6: a solid's prescribed groups' work (support_work and its last half step).  5: the rolling spring's history holds the moment the contact applied at the last evaluation too (6 columns, not
 # 3).  4: the tangential history holds the force the contact applied at the last evaluation too (6 columns, not 3:
@@ -98,7 +98,6 @@ MANIFEST = "state_manifest"
 MARKER = "pdemfem_checkpoint"
 LATEST = "latest.h5"
 PREFIX = "checkpoint_"
-DIVERGED_SUFFIX = "_diverged"  # a stopped run's last state, kept for inspection: never latest.h5, never pruned
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 

@@ -9,7 +9,8 @@ Collective; rank 0 looks at the disk and every rank raises the same PdemfemError
   afresh: with `clear`, those files are deleted first, so old and new never mix).
 * The checkpoint directory holds checkpoints (checkpoint_*.h5, latest.h5) and the run does not
   continue from one: refused even with `force` -- a run never deletes or overwrites checkpoints
-  it did not write (the user deletes or moves them, or continues them with --restart).
+  it did not write (the user deletes or moves them, or continues them with --restart).  The state a
+  diverged run stopped at (checkpoint_<step>_diverged.h5) counts with the results: `force` deletes it.
 * Both directories must be writable: each is created and a probe file written and removed, so
   a read-only or impossible location is one clear error before the first step, not a traceback
   from the first write.  A checkpoint directory created only for the probe is removed again.
@@ -24,6 +25,9 @@ from pdemfem.errors import OutputError
 HISTORY = "history.csv"
 PLOTS = "plots"
 CHECKPOINT_PATTERNS = ("checkpoint_*.h5", "latest.h5")
+# The state a diverged run stopped at, checkpoint_<step>_diverged.h5: kept for inspection, never latest.h5, never
+# pruned, and counted with the run's results (what --force replaces), not with the checkpoints to continue.
+DIVERGED_SUFFIX = "_diverged"
 
 
 def previous_results(output_dir: Path) -> list:
@@ -78,14 +82,16 @@ def _check_on_root(output_dir: Path, checkpoint_dir: Path, restart: bool, force:
         if refusal is not None:
             return refusal
     if not restart:
-        checkpoints = previous_checkpoints(checkpoint_dir)
+        every = previous_checkpoints(checkpoint_dir)
+        stopped = [path for path in every if path.stem.endswith(DIVERGED_SUFFIX)]
+        checkpoints = [path for path in every if path not in stopped]
         if checkpoints:
             return (str(checkpoint_dir),
                     f"holds checkpoints of an earlier run ({_names(checkpoints, checkpoint_dir)}); a run never "
                     f"deletes or overwrites checkpoints it did not write, not even with --force",
                     f"continue that run with --restart {checkpoint_dir}, or move or delete them "
                     f"(rm -r {checkpoint_dir}), or write elsewhere (-o DIR / checkpoint.dir)")
-        results = previous_results(output_dir)
+        results = previous_results(output_dir) + stopped
         if results and not force:
             return (str(output_dir),
                     f"holds the results of an earlier run ({_names(results, output_dir)}); a new run would "
