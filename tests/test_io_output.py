@@ -186,8 +186,28 @@ def test_a_history_row_cut_short_by_a_kill_is_dropped_on_restart(tmp_path):
     for cut in ("0.012,12", "0.012,", "0.012,120,3"):
         path = tmp_path / "history.csv"
         path.write_text("time,step,particles\n0.0,0,3\n0.001,10,3\n" + cut)
-        _truncate_history(path, 100)
+        _truncate_history(path, 100, ["time", "step", "particles"])
         assert path.read_text().splitlines() == ["time,step,particles", "0.0,0,3", "0.001,10,3"], cut
+
+
+def test_a_restart_that_writes_other_columns_continues_a_table_with_all_of_them(tmp_path):
+    """A checkpoint of an earlier version (or a scene changed with --force) continued under the old header: the
+    new rows had a field more than the header, which a csv reader put under no name."""
+    from pdemfem.io.history import HistoryWriter
+    from pdemfem.io.simulation_io import _truncate_history
+    from pdemfem.plot import read_history
+
+    path = tmp_path / "history.csv"
+    path.write_text("time,step,gone\n0.0,0,1.0\n0.001,10,2.0\n0.002,20,3.0\n")
+    has_row, columns = _truncate_history(path, 10, ["time", "step", "lost_energy"])
+    assert has_row and columns == ["time", "step", "lost_energy", "gone"]
+    writer = HistoryWriter(path, columns, True, append=True)
+    writer.write({"time": 0.002, "step": 20, "lost_energy": 0.5})
+    writer.close()
+    table = read_history(path)
+    np.testing.assert_array_equal(table["step"], [0, 10, 20])
+    np.testing.assert_array_equal(table["lost_energy"], [np.nan, np.nan, 0.5])
+    np.testing.assert_array_equal(table["gone"], [1.0, 2.0, np.nan])
 
 
 def test_a_field_list_without_positions_writes_them_with_the_fields(tmp_path):

@@ -341,32 +341,33 @@ class ClumpBodies(kinds.StateComponent):
 
     # ------------------------------------------------------------------ removal
     def remove_leaving(self, state, outside: np.ndarray, gravity, half_dt: float) -> tuple:
-        """(`outside` (owned rows leaving) grown to every member of a body one of whose members leaves, the
-        kinetic + rotational + potential energy [J] those bodies carry out (the finite ones), at the end of the
-        step: the rebuild comes at the half step, so the second half kick is completed with the last loads, as
-        pdemfem.particles.energy.energy_leaving does for spheres); those bodies are dropped and the remaining
-        members' body indices renumbered."""
+        """(`outside` (owned rows leaving) grown to every member of a body one of whose members leaves, the ids of
+        those bodies, the kinetic + rotational + potential energy [J] each carries out); those bodies are dropped
+        and the remaining members' body indices renumbered.  The energy is the end of the step's, as
+        pdemfem.particles.energy.energy_leaving books a sphere's: the rebuild comes at the half step, and the
+        second half kick is completed with gravity (the step's contact loads are not known yet).  The caller
+        counts the bodies (ClumpBodies.lost) and books their energy once: while the bodies are `replicated`
+        (after a checkpoint was read), ranks holding members of one body each report it."""
         self._refuse_pending_kick("a list rebuild")  # (every rebuild passes here first)
         body = state.fields[BODY_FIELD][:state.owned_count]
         leaving = np.unique(body[outside & (body >= 0)])
         if not len(leaving):
-            return outside, 0.0
+            return outside, np.zeros(0, dtype=np.int64), np.zeros(0)
         outside = outside | np.isin(body, leaving)
         gone = np.isin(self.ids, leaving)
         rows = np.flatnonzero(gone)
         spins = np.zeros(len(rows))
         gravity = np.asarray(gravity, dtype=float)
-        velocities = self.velocities[rows] + half_dt * (self.forces[rows] / self.masses[rows, None] + gravity)
-        momenta = self.angular_momenta[rows] + half_dt * self.torques[rows]
-        rotational_energies(len(rows), np.ascontiguousarray(self.orientations[rows]), np.ascontiguousarray(momenta),
+        velocities = self.velocities[rows] + half_dt * gravity
+        rotational_energies(len(rows), np.ascontiguousarray(self.orientations[rows]),
+                            np.ascontiguousarray(self.angular_momenta[rows]),
                             np.ascontiguousarray(self.principal_moments[rows]), spins)
         energies = (0.5 * self.masses[rows] * np.einsum("ij,ij->i", velocities, velocities)
                     + spins - self.masses[rows] * (self.positions[rows] @ gravity))
-        carried = float(np.sum(energies[np.isfinite(energies)]))
+        ids = self.ids[rows].copy()
         self._keep(np.flatnonzero(~gone))
-        self.lost += int(gone.sum())
         self._derive()
-        return outside, carried
+        return outside, ids, energies
 
     # ------------------------------------------------------------------ checkpoints
     _STORED = ("ids", "group_index", "positions", "orientations", "velocities", "angular_momenta", "masses",

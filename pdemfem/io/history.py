@@ -30,8 +30,9 @@ class HistoryWriter:
     def write(self, values: dict) -> None:
         if self._file is None:
             return
-        self._writer.writerow([repr(float(values[name])) if not isinstance(values[name], int) else values[name]
-                               for name in self.columns])
+        # A column this run does not write (kept from the run it continues): nan.
+        self._writer.writerow([repr(float(values.get(name, np.nan))) if not isinstance(values.get(name), int)
+                               else values[name] for name in self.columns])
         self._file.flush()
 
     def close(self) -> None:

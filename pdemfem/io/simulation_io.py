@@ -105,8 +105,9 @@ class SimulationIO:
         append = sim.step_count > 0
         has_resume_row = False
         if comm.rank == 0 and append and self.resume_step is not None:
-            has_resume_row = _truncate_history(history_path, self.resume_step)
-        if comm.bcast(has_resume_row, root=0):
+            has_resume_row, columns = _truncate_history(history_path, self.resume_step, columns)
+        has_resume_row, columns = comm.bcast((has_resume_row, columns), root=0)
+        if has_resume_row:
             # The checkpoint's step has its row and field step already: a run stopped there at once (diverged
             # again, or by a signal) must not write them twice.
             self._last_output_step = self.resume_step
@@ -489,26 +490,34 @@ class SimulationIO:
 OPTIONAL_COMPONENT = "surface_force_means"
 
 
-def _truncate_history(path: Path, step: int) -> bool:
-    """Keep the header and the rows up to `step` (a restart continues the table); whether a row of `step` is
-    among them."""
+def _truncate_history(path: Path, step: int, columns: list) -> tuple:
+    """Keep the header and the rows up to `step` (a restart continues the table): (whether a row of `step` is
+    among them, the columns the continued table has).
+
+    A column the run now writes and the file lacks (a newer version's, or a scene changed with --force) is added,
+    `nan` in the earlier rows; one the file has and the run no longer writes stays, `nan` in the new rows.  (The
+    rows were appended under the old header: a reader put the extra field under no name.)"""
     if not path.exists():
-        return False
+        return False, columns
     with open(path, newline="") as handle:
         rows = list(csv.reader(handle))
     if not rows:
-        return False
+        return False, columns
     header, body = rows[0], rows[1:]
     column = header.index("step") if "step" in header else None
     # A row cut short by a kill mid-write (fewer fields than the header) is dropped, not parsed.
     kept = [row for row in body if len(row) == len(header) and (column is None or int(float(row[column])) <= step)]
+    continued = list(columns) + [name for name in header if name not in columns]
+    if continued != header:
+        where = {name: index for index, name in enumerate(header)}
+        kept = [[row[where[name]] if name in where else "nan" for name in continued] for row in kept]
     temporary = path.with_name(path.name + ".tmp")
     with open(temporary, "w", newline="") as handle:
         writer = csv.writer(handle)
-        writer.writerow(header)
+        writer.writerow(continued)
         writer.writerows(kept)
     temporary.replace(path)
-    return column is not None and bool(kept) and int(float(kept[-1][column])) == step
+    return column is not None and bool(kept) and int(float(kept[-1][continued.index("step")])) == step, continued
 
 
 class _SolidOutputLayout:

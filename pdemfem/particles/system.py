@@ -481,8 +481,8 @@ class ParticleSystem(kinds.StateComponent):
                                             self.domain_upper, bounded)
         carried = self._energy_carried_out(outside)
         if self.clumps is not None:  # a clump goes whole (counted as its member spheres)
-            outside, body_energy = self.clumps.remove_leaving(state, outside, self.gravity, 0.5 * self.dt)
-            carried += body_energy
+            outside, bodies, energies = self.clumps.remove_leaving(state, outside, self.gravity, 0.5 * self.dt)
+            carried += self._book_leaving_bodies(bodies, energies)
         totals = np.array([np.count_nonzero(outside), nonfinite, carried], dtype=float)
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, totals, op=MPI.SUM)
@@ -503,6 +503,23 @@ class ParticleSystem(kinds.StateComponent):
     def removes_leaving(self) -> bool:
         """Whether the domain box bounds an axis that is not periodic (particles beyond it are removed)."""
         return bool(np.any(np.isfinite(self.domain_lower) & (self.periodic_lengths == 0)))
+
+    def _book_leaving_bodies(self, bodies: np.ndarray, energies: np.ndarray) -> float:
+        """Collective while the clumps are replicated: count the bodies that left (ClumpBodies.lost) and return
+        this rank's share of their energy for the sum over the ranks.  Right after a checkpoint was read every
+        rank holds every body and one body's members may sit on two ranks until they migrate, so each of those
+        ranks reports the body: it is counted and booked once, on rank 0 (it was booked twice on 2 ranks)."""
+        clumps, comm = self.clumps, self.comm
+        if clumps.replicated and comm.size > 1:
+            reports = comm.allgather((bodies, energies))
+            every_id = np.concatenate([ids for ids, _ in reports])
+            every_energy = np.concatenate([values for _, values in reports])
+            _, first = np.unique(every_id, return_index=True)
+            if comm.rank != 0:
+                return 0.0
+            bodies, energies = every_id[first], every_energy[first]
+        clumps.lost += len(bodies)
+        return float(np.sum(energies[np.isfinite(energies)]))
 
     def _energy_carried_out(self, outside: np.ndarray) -> float:
         """The energy the free spheres among the owned rows `outside` carry out (energy_leaving; a clump's is its
