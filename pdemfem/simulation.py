@@ -350,7 +350,9 @@ class Simulation:
             path = self.io.write_checkpoint(diverged=True)
             earlier = self.io.last_checkpoint
             restart = (f"the last checkpoint before it is {earlier[1]} (step {earlier[0]}; latest.h5 is not moved "
-                       f"to the stopped state): continue from it with --restart once fixed" if earlier is not None else
+                       f"to the stopped state): continue from it with --restart once fixed (with --force for a "
+                       f"physics change; a fix that changes the step needs a fresh run with --force, since dt is "
+                       f"stored state)" if earlier is not None else
                        "there is no checkpoint before it: run again with --force once fixed (it starts afresh, "
                        "replacing this run's outputs and the stopped state)")
             raise SolverError(error.where, f"{error.problem}\n  the state at the stop is kept for inspection in "

@@ -107,6 +107,9 @@ def test_another_scenes_checkpoint_is_refused_first_for_what_no_edit_fixes(finis
     code, _, err = run(capsys, "run", other, "-o", tmp_path / "o", "--quiet", "--restart", latest, "--force")
     assert code == 2, err
     assert "holds the 20 particles" in err and "nothing left to run" not in err and "time.dt" not in err, err
+    # Without --force as well: the physics change came first and advised "add --force", which cannot help.
+    code, _, err = run(capsys, "run", other, "-o", tmp_path / "o", "--quiet", "--restart", latest)
+    assert code == 2 and "holds the 20 particles" in err and "add --force" not in err, err
 
 
 @pytest.mark.parametrize("change", ["moved", "added"])

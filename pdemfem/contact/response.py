@@ -79,8 +79,8 @@ def dashpot_onset(overlap, approach_rate, elastic_force, normal_stiffness, dt):
     force here stands for [t - dt/2, t + dt/2] and the one before, which saw no contact, for the window before,
     so the continuous dashpot's impulse over both, with c ~ overlap^p (p = 0 linear, 1/4 Hertz: c ~ sqrt(S_n)),
     is c(overlap) approach (tau + dt/2)^(p+1) / ((p + 1) tau^p).  p comes from the elastic law itself:
-    S_n overlap / F = 1 + 2p for F ~ overlap^(1 + 2p).  Later evaluations (tau > dt), receding or
-    adhesive contacts get 1.  The clamped force law ends with a force that falls to zero continuously: no
+    S_n overlap / F = 1 + 2p for F ~ overlap^(1 + 2p).  Later evaluations (tau > dt), receding contacts
+    and contacts whose elastic force is not yet repulsive (a JKR contact's first touch) get 1.  The clamped force law ends with a force that falls to zero continuously: no
     factor is needed there."""
     if approach_rate <= 0.0 or overlap <= 0.0 or elastic_force <= 0.0 or overlap >= approach_rate * dt:
         return 1.0

@@ -659,6 +659,15 @@ class _Bad(Exception):
 OLDER_FIX = "restart from an older checkpoint in the same directory (checkpoint_<step>.h5), or start anew"
 
 
+def physics_refusal(attrs: dict, expected_hash, force: bool, expected_physics=None):
+    """(problem, fix) when the checkpoint's scene hash is not `expected_hash` and not `force`, else None."""
+    if expected_hash is None or attrs.get("scene_hash") == expected_hash or force:
+        return None
+    return (_changed_physics_problem(attrs, expected_hash, expected_physics),
+            "restart with the scene that wrote it; if the change is deliberate add --force "
+            "(Python: force=True); time.end, output.* and checkpoint.* may change freely")
+
+
 def _changed_physics_problem(attrs: dict, expected_hash: str, expected_physics) -> str:
     """What changed in the scene (key: old -> new) when the checkpoint stored its scene's physics."""
     from pdemfem.scene.loader import physics_changes
@@ -705,11 +714,9 @@ def _read_local(path: Path, comm, expected_hash, force: bool, expected_version: 
                        "restart with the pdemfem version that wrote it, or start the run anew")
         for name in json.loads(attrs.pop("json_attributes", "[]")):
             attrs[name] = json.loads(attrs[name])
-        stored_hash = attrs.get("scene_hash")
-        if expected_hash is not None and stored_hash != expected_hash and not force:
-            raise _Bad(_changed_physics_problem(attrs, expected_hash, expected_physics),
-                       "restart with the scene that wrote it; if the change is deliberate add --force "
-                       "(Python: force=True); time.end, output.* and checkpoint.* may change freely")
+        refusal = physics_refusal(attrs, expected_hash, force, expected_physics)
+        if refusal is not None:
+            raise _Bad(*refusal)
         attrs.pop(MARKER, None)
         result = Checkpoint(path=path, attributes=attrs)
         checks = []  # (dataset path, stored sum, local sum, summed over ranks?)

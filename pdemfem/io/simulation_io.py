@@ -295,17 +295,20 @@ class SimulationIO:
     def restore(self, path, force: bool = False) -> None:
         """Collective: continue from a checkpoint (any rank count); raises CheckpointError."""
         sim, comm = self.sim, self.comm
-        checkpoint, state = ckpt.read_state(path, comm, expected_hash=scene_hash(sim.scene), force=force,
-                                            expected_physics=scene_physics(sim.scene))
+        # Read whatever the scene: what no --force and no edit of time.end or dt can fix (another scene's particles
+        # or solids) is named before the physics change that --force would accept.
+        checkpoint, state = ckpt.read_state(path, comm, expected_hash=None)
         attributes = checkpoint.attributes
         where = str(checkpoint.path)
         step = int(attributes["step"])
-        # What no edit of time.end or dt can fix first: another scene's particles or solids.
         changes = self._changes(attributes)
         self._refuse_other_particles(where, attributes, changes, force)
         if sorted(attributes.get("solids", [])) != sorted(sim.solids):
             raise CheckpointError(where, f"holds solids {attributes.get('solids')}, the scene has {list(sim.solids)}",
                                   "restart with the scene that wrote the checkpoint")
+        refusal = ckpt.physics_refusal(attributes, scene_hash(sim.scene), force, scene_physics(sim.scene))
+        if refusal is not None:
+            raise CheckpointError(where, *refusal)
         total_steps = int(math.ceil(sim.scene.time.end / sim.dt - 1e-9))  # as Simulation.run
         if step >= total_steps:
             raise CheckpointError(where, f"was written at step {step} (t = {step * sim.dt:.6g} s), at or past "
