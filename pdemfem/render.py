@@ -309,8 +309,9 @@ class _Picture:
         if loaded is not None:
             solid_names = [solid.name for solid in loaded[0].solids]
         else:
+            # Every series but the particles' and the clumps' (clumps.h5: the bodies beside their member spheres).
             solid_names = [path.stem for path in sorted(outdir.glob("*.h5"))
-                           if path.stem != "particles" and (outdir / f"{path.stem}.xdmf").is_file()]
+                           if path.stem not in ("particles", "clumps") and (outdir / f"{path.stem}.xdmf").is_file()]
         solid_names = [name for name in solid_names if (outdir / f"{name}.h5").is_file()]
         surfaces = [_solid_surface(outdir / f"{name}.h5") for name in solid_names]
         if not len(positions) and not surfaces:

@@ -72,6 +72,20 @@ def test_render_draws_particles_solids_and_walls(tiny_run, tmp_path):
     assert (tmp_path / "cli.png").read_bytes()[:8] == PNG
 
 
+def test_render_without_the_scene_does_not_take_the_clump_series_for_a_solid(tiny_run, tmp_path):
+    """A clump run writes clumps.h5/.xdmf beside particles.h5; without --scene, render took it for a solid series
+    and stopped with a KeyError traceback."""
+    _, out = tiny_run
+    copy_of_run = tmp_path / "out"
+    shutil.copytree(out, copy_of_run)
+    # The bodies' series has the particle series' layout (pdemfem.io.particle_output): a copy stands for it.
+    shutil.copy(copy_of_run / "particles.h5", copy_of_run / "clumps.h5")
+    (copy_of_run / "clumps.xdmf").write_text((copy_of_run / "particles.xdmf").read_text().replace("particles.h5",
+                                                                                                  "clumps.h5"))
+    picture = render_output(copy_of_run, target=tmp_path / "bare.png", renderer="matplotlib")
+    assert picture.read_bytes()[:8] == PNG
+
+
 # An X11 build of ParaView (Debian's) needs an X display even offscreen: $DISPLAY, or Xvfb which render starts.
 PARAVIEW_HAS_A_DISPLAY = (not sys.platform.startswith("linux") or bool(os.environ.get("DISPLAY"))
                           or shutil.which("Xvfb") is not None)
