@@ -162,3 +162,14 @@ def test_run_after_steps_taken_through_the_api_writes_the_state_it_starts_from(t
     sim.run(progress=False)
     history = read_history(tmp_path / "run" / "history.csv")
     assert list(history["step"]) == [3] + list(range(STEPS_PER_ROW, steps + 1, STEPS_PER_ROW))
+    # The same after a restart: the checkpoint's row is there, and the state after the steps taken since.
+    scene = grains_scene(steps)
+    scene["checkpoint"] = {"every": 2 * STEPS_PER_ROW * scene["time"]["dt"]}
+    Simulation.from_dict(scene, base_dir=tmp_path, output_dir=tmp_path / "again").run(progress=False)
+    resumed = Simulation.from_dict(scene, base_dir=tmp_path, output_dir=tmp_path / "again",
+                                   restart=tmp_path / "again" / "checkpoints" / f"checkpoint_{2 * STEPS_PER_ROW:012d}.h5")
+    resumed.step(3)
+    resumed.run(progress=False)
+    history = read_history(tmp_path / "again" / "history.csv")
+    assert list(history["step"]) == [0, STEPS_PER_ROW, 2 * STEPS_PER_ROW, 2 * STEPS_PER_ROW + 3, 3 * STEPS_PER_ROW,
+                                     4 * STEPS_PER_ROW]
