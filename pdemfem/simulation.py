@@ -289,7 +289,7 @@ class Simulation:
         every = self.scene.checkpoint.every
         steps_per_checkpoint = self._steps_per(every) if every else None
         self.io.open()
-        if self.step_count == 0 or self.io.restarted_from is None or self.step_count != self.io.resume_step:
+        if self.step_count == 0 or self.step_count != self.io.resume_step:  # (resume_step: None without a restart)
             # The state the run starts from (after steps taken through the API too: the series began at the first
             # scheduled row after them); a restart's is the checkpoint's row, already in the history.
             self.io.write_output()

@@ -6,20 +6,16 @@ when Debian's paraview is installed, ParaView's own Xdmf3 reader (pvpython).
 """
 from __future__ import annotations
 
-import json
-import os
 import shutil
-import subprocess
 import sys
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import h5py
 import meshio
 import numpy as np
 import pytest
 
-from mpi_harness import CASES, run_under_mpi
+from mpi_harness import CASES, paraview_views, run_under_mpi
 
 sys.path.insert(0, str(CASES))
 import io_data  # noqa: E402
@@ -111,14 +107,7 @@ def test_paraview_opens_both_series(written):
     ranks, out = written
     if ranks != 2:
         pytest.skip("ParaView is checked on the 2-rank files only (5 s per run)")
-    environment = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
-    environment.setdefault("QT_QPA_PLATFORM", "offscreen")
-    completed = subprocess.run([pvpython, str(CASES / "io_paraview.py"), str(out / "particles.xdmf"),
-                                str(out / "block.xdmf")], capture_output=True, text=True, timeout=180,
-                               env=environment)
-    assert completed.returncode == 0, completed.stderr
-    lines = [json.loads(line) for line in completed.stdout.splitlines() if line.startswith("{")]
-    particles, block = lines
+    particles, block = paraview_views(pvpython, out / "particles.xdmf", out / "block.xdmf")
     assert particles["points"] == [c for _, _, c in io_data.PARTICLE_STEPS]
     assert particles["cells"] == particles["points"]  # one vertex cell per particle: drawable
     assert particles["times"] == pytest.approx([t for _, t, _ in io_data.PARTICLE_STEPS])

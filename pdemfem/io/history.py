@@ -31,8 +31,8 @@ class HistoryWriter:
         if self._file is None:
             return
         # A column this run does not write (kept from the run it continues): nan.
-        self._writer.writerow([repr(float(values.get(name, np.nan))) if not isinstance(values.get(name), int)
-                               else values[name] for name in self.columns])
+        row = [values.get(name, np.nan) for name in self.columns]
+        self._writer.writerow([value if isinstance(value, int) else repr(float(value)) for value in row])
         self._file.flush()
 
     def close(self) -> None:
