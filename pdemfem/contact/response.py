@@ -99,8 +99,12 @@ def dashpot_onset(overlap, approach_rate, elastic_force, normal_stiffness, dt):
 @njit(inline="always", cache=True)
 def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, vy, vz, previous_vx, previous_vy,
                      previous_vz, wx, wy, wz, effective_mass, effective_radius, effective_inertia, rolling_inertia, history, row,
-                     dt):
+                     dt, may_be_first):
     """Force and rolling moment on i for one contact; updates history[row].
+
+    may_be_first: whether this evaluation may be the contact's first (dashpot_onset); False where the caller
+    has set first evaluations apart (the pair loop: with the onset's code inlined for every contact, the
+    settled bed's loop took 13-16 % longer, though 12 of its 65,400 contacts were first evaluations).
 
     previous_v is the contact point's relative velocity of this step as the previous evaluation's geometry
     (normal, levers) sees it: what the tangential force applied then worked on (used with friction only).
@@ -121,7 +125,9 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
     normal_speed = vx * nx + vy * ny + vz * nz
     approach_rate = -normal_speed
     gamma = coefficients[a, b, DAMPING]
-    onset = dashpot_onset(overlap, approach_rate, elastic_force, normal_stiffness, dt)
+    onset = 1.0
+    if may_be_first:
+        onset = dashpot_onset(overlap, approach_rate, elastic_force, normal_stiffness, dt)
     normal_damping = onset * dashpot(gamma, effective_mass, normal_stiffness)
     normal_force = elastic_force + normal_damping * approach_rate
     floor = min(elastic_force, 0.0)
@@ -208,8 +214,7 @@ def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz
     fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = contact_response(
         composition, coefficients, material, wall_row, nx, ny, nz, radius - distance, relative_x, relative_y,
         relative_z, previous_x, previous_y, previous_z, wx, wy, wz, mass, radius, effective_inertia, rolling_inertia,
-        history, slot,
-        dt)
+        history, slot, dt, True)
     tx = -lever * (ny * fz - nz * fy) + mx
     ty = -lever * (nz * fx - nx * fz) + my
     tz = -lever * (nx * fy - ny * fx) + mz

@@ -80,6 +80,7 @@ class ParticleSystem(kinds.StateComponent):
         self.walls = walls
         self.tables = tables
         self.contact_kernels = contact_kernels(tables.composition)  # pair_forces, plane_wall_forces
+        self._set_apart = self.contact_kernels.set_apart_buffer()  # pair_forces' first evaluations
         specialized_ranks = comm.allreduce(int(self.contact_kernels is not generic_contact_kernels))
         if 0 < specialized_ranks < comm.size:
             # Where some rank could not write the composition's module, all run the generic kernels: the ranks
@@ -597,7 +598,7 @@ class ParticleSystem(kinds.StateComponent):
         pair_arguments = (neighbors.partners, neighbors.history, state.ids, owned, state.positions, state.velocities,
                           state.angular_velocities, state.radii, state.mass, state.inverse_inertia,
                           state.material_index, tables.coefficients, tables.composition, self.dt, state.forces,
-                          state.torques, temperatures, heat_flows)
+                          state.torques, temperatures, heat_flows, self._set_apart)
         elastic, dissipated, contacts, deepest_pair = self.contact_kernels.pair_forces(*neighbors.interior,
                                                                                        *pair_arguments)
         pair_contacts = contacts
