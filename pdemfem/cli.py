@@ -352,7 +352,7 @@ def _command_run(arguments, comm) -> int:
                    f"dt = {dt:.3g} s, end = {scene.time.end:g} s, output: {output_dir}")
     # The warnings of `pdemfem check`, before the first step (stderr, also with --quiet).
     solid_step = simulation.dt if simulation.solids and not scene.particles else None
-    found = derived.warnings(scene, solid_critical_step=solid_step)
+    found = derived.warnings(scene, solid_critical_step=solid_step, dt=simulation.dt)
     found += derived.mesh_wall_warnings(scene, simulation.contributor_walls) + simulation.coupling_warnings
     if comm.rank == 0:
         for warning in found:
@@ -575,7 +575,7 @@ def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tup
             lines.append("heat: on (contact conduction" + (", solids conduct" if scene.solids else "") + ")" + (
                 f"; thermal step limit ~{thermal[0]:.3g} s ({thermal[1]}), dt is {dt / thermal[0]:.2g} of it"
                 if thermal is not None else ""))
-    found = derived.warnings(scene, solid_critical_step=solid_step) + list(mesh_warnings)
+    found = derived.warnings(scene, solid_critical_step=solid_step, dt=dt) + list(mesh_warnings)
     if scene.solids:
         from pdemfem.coupling.check import coupling_report
 

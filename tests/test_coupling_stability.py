@@ -233,6 +233,33 @@ def test_dt_auto_takes_the_step_a_yielding_surface_allows(tmp_path):
     assert speeds[-1] < speeds[0], speeds
 
 
+def test_the_output_warnings_quote_the_step_a_yielding_surface_sets(tmp_path):
+    """The same soft block: check and run warn about output.every against the step the run takes (half the
+    node's limit), not the particles' own (6.8e-3 s): an interval between the two is not 'shorter than dt'."""
+    import yaml
+
+    from pdemfem import Simulation
+    from pdemfem.cli import check_report
+    from pdemfem.scene import derived
+    from pdemfem.scene.loader import load_scene
+
+    scene = resting_scene(8, end=0.4)
+    scene["materials"]["steel"]["youngs_modulus"] = 1e6
+    scene["time"]["dt"] = "auto"
+    particle_step = derived.time_step(load_scene(scene)[0])
+    run_step = Simulation.from_dict(scene, output_dir=str(tmp_path / "run")).dt
+    assert run_step < 0.5 * particle_step, (run_step, particle_step)
+    for every, warned in ((0.5 * (run_step + particle_step), False), (0.5 * run_step, True)):
+        scene["output"] = {"every": every}
+        path = tmp_path / "scene.yaml"
+        path.write_text(yaml.safe_dump(scene))
+        _, warnings = check_report(str(path))
+        shorter = [w for w in warnings if "is shorter than dt" in w]
+        assert bool(shorter) == warned, (every, run_step, warnings)
+        if warned:
+            assert f"dt = {run_step:.3g} s" in shorter[0], shorter
+
+
 def soft_block_rest_scene(element: str, end: float) -> dict:
     """A sphere (R = 0.03 m, E = 5e7) resting undamped (e = 1, friction 0.4) at its Hertz overlap on a block as
     soft (E = 5e7) meshed 2 x 2 x 1: with the automatic step the block takes 2 (P1) or 4 (P2) FE sub-steps per

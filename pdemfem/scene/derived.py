@@ -755,11 +755,12 @@ def _format_seconds(value: float) -> str:
     return f"{value:.3g} s"
 
 
-def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[str]:
+def warnings(scene: Scene, solid_critical_step: Optional[float] = None, dt: Optional[float] = None) -> List[str]:
     """Plain-language warnings about accuracy, stability or cost; an empty list when none.
 
     Not errors: the scene runs, but probably not as intended.  `pdemfem check` prints them and
-    `pdemfem run` repeats them before the first step.
+    `pdemfem run` repeats them before the first step.  dt: the step the run takes when it is known (a
+    coupled scene's dt auto can be lowered by a solid's surface nodes); time_step(scene) otherwise.
     """
     found: List[str] = list(solid_warnings(scene))
     if scene.time.expected_impact_speed is None:
@@ -772,10 +773,11 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None) -> List[
     if count == 0 and not any(group.insert.kind == "stream" for group in scene.particles):
         found.append("the scene has no particles")
         return found
-    try:
-        dt = time_step(scene, solid_critical_step)
-    except SceneError:
-        return found
+    if dt is None:
+        try:
+            dt = time_step(scene, solid_critical_step)
+        except SceneError:
+            return found
     rayleigh = rayleigh_time(scene)
     if scene.time.dt != "auto" and rayleigh is not None and dt > RAYLEIGH_LIMIT * rayleigh:
         found.append(
