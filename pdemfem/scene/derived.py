@@ -440,11 +440,13 @@ def fall_height(scene: Scene) -> float:
     at the extremes of where it starts (listed particles: centre minus radius;
     regions: the top of the region minus the smallest diameter, see
     `_group_bottoms`).  Each such point drops to the first plane wall below it
-    that faces upwards (normal . up > 0, e.g. a floor or a tilted chute),
-    measured along the vertical, so tilted planes count where the point is.  Where
-    no such wall lies below a point, it drops to the lowest starting point of all
-    particles (particles then only hit each other).  h is the largest drop; 0
-    without gravity or particles.
+    that faces upwards (normal . up > 0, e.g. a floor or a tilted chute), or to
+    a solid's contact surface generated as a box (`mesh: {box: ...}`; a solid
+    meshed from a file is not known before its mesh is read, and `warnings`
+    says so), measured along the vertical, so tilted planes count where the
+    point is.  Where nothing lies below a point, it drops to the lowest
+    starting point of all particles (particles then only hit each other).  h is
+    the largest drop; 0 without gravity or particles.
     """
     up = _up(scene)
     if up is None or not scene.particles:
@@ -456,8 +458,40 @@ def fall_height(scene: Scene) -> float:
     height = 0.0
     for point in points:
         drops = [drop for wall in scene.walls for drop in (_drop_to_wall(point, up, wall),) if drop is not None]
+        drops += [drop for solid in scene.solids for drop in (_drop_to_box_solid(point, up, solid),)
+                  if drop is not None]
         height = max(height, min(drops) if drops else _dot(point, up) - lowest)
     return height
+
+
+# The faces of a generated box mesh, by axis and side (the group names a solid's `contact` lists).
+_BOX_FACES = (("xmin", "xmax"), ("ymin", "ymax"), ("zmin", "zmax"))
+
+
+def _drop_to_box_solid(point, up, solid) -> Optional[float]:
+    """Distance from `point` straight down (along -up) to where it enters a solid meshed as a box, when the
+    face it enters is one of the solid's contact groups; None otherwise (not below, a face particles pass
+    through, a mesh file, or a point inside the box)."""
+    box = getattr(getattr(solid, "mesh", None), "box", None)
+    if box is None or not solid.contact:
+        return None
+    entry, exit_, entry_face = -math.inf, math.inf, None
+    for axis in range(3):
+        low, high = box[0][axis], box[1][axis]
+        direction = -up[axis]
+        if abs(direction) < 1e-15:
+            if not low <= point[axis] <= high:
+                return None
+            continue
+        near, far = (low, high) if direction > 0 else (high, low)
+        t_near = (near - point[axis]) / direction
+        t_far = (far - point[axis]) / direction
+        if t_near > entry:
+            entry, entry_face = t_near, _BOX_FACES[axis][0 if direction > 0 else 1]
+        exit_ = min(exit_, t_far)
+    if entry_face is None or entry > exit_ or entry < 0.0 or entry_face not in solid.contact:
+        return None
+    return entry
 
 
 def _drop_to_wall(point, up, wall) -> Optional[float]:
@@ -839,6 +873,14 @@ def warnings(scene: Scene, solid_critical_step: Optional[float] = None, dt: Opti
         found.append(
             f"the impact-speed estimate cannot see mesh walls ({', '.join(meshes)}): set "
             "time.expected_impact_speed to the largest speed at which particles hit them"
+        )
+    meshed_solids = [solid.name for solid in scene.solids
+                     if solid.contact and getattr(solid.mesh, "box", None) is None and solid.motion is None]
+    if up is not None and meshed_solids and scene.time.expected_impact_speed is None:
+        found.append(
+            f"the impact-speed estimate cannot see the contact surfaces of solids meshed from a file "
+            f"({', '.join(meshed_solids)}): set time.expected_impact_speed to the largest speed at which particles "
+            "hit them (dt auto resolves impacts at that speed)"
         )
     found.extend(_tunnelling_warnings(scene, speed, dt, smallest_radius))
     for ratio, label in thin_surface_overlaps(scene, speed):
