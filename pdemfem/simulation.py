@@ -337,6 +337,14 @@ class Simulation:
         pruned the checkpoint of the run's middle)."""
         return step % steps_per == 0 and (step // steps_per) * interval < end - 0.5 * self.dt
 
+    def _end_row_closes_an_interval(self, step: int) -> bool:
+        """Whether `step` is the end's and time.end is a multiple of output.every (to half a step): the end's row
+        then takes the place of that interval's scheduled row."""
+        end, interval = self.scene.time.end, self.output_interval
+        intervals = round(end / interval)
+        return (step == int(math.ceil(end / self.dt - 1e-9)) and intervals >= 1
+                and abs(intervals * interval - end) <= 0.5 * self.dt)
+
     def _guarded(self, check) -> None:
         """Run a monitor check (collective); on divergence write the output step, and a checkpoint when
         checkpoints are on, then re-raise the SolverError (exit 3) on every rank."""
@@ -416,8 +424,11 @@ class Simulation:
         names = self._surface_names()
         instantaneous = [self.wall_force(name) for name in names]
         # Before the first step of a run (or of a restart) no step has been averaged: the forces now.  A row off
-        # the output schedule (the end, a stop) leaves the interval running for the next scheduled row.
-        on_schedule = self.step_count % self._steps_per(self.output_interval) == 0
+        # the output schedule (the end, a stop) leaves the interval running for the next scheduled row, except the
+        # end's row when time.end closes an output interval: it stands for that interval's row (_scheduled), so a
+        # run extended past it averages the next interval alone (it averaged two: a gate's load read +26 %).
+        on_schedule = (self.step_count % self._steps_per(self.output_interval) == 0
+                       or self._end_row_closes_an_interval(self.step_count))
         means = self.surface_force_means.take(fallback=instantaneous, restart=on_schedule)
         for name, force, mean in zip(names, instantaneous, means):
             for axis, label in enumerate("xyz"):

@@ -75,6 +75,38 @@ def test_a_run_extended_past_its_old_end_has_the_uninterrupted_means(tmp_path):
     assert parts["mean_force_floor_z"][end_row] not in whole["mean_force_floor_z"]
 
 
+def test_a_run_ending_a_step_past_an_interval_restarts_the_mean_at_its_end_row(tmp_path):
+    """time.end = 2 output intervals, rounded up to the step after the second row's (output.every = 5.4 dt: rows
+    every 5 steps, the end at step 11): the end's row stands for the second interval's.  Extended by raising
+    time.end, the next row (step 15) averages the steps since the end's row.  It averaged both intervals
+    (steps 6..15) before: the tester's hopper gate read +26 %."""
+    dt = GRAINS["time"]["dt"]
+    every = 5.4 * dt
+    first = copy.deepcopy(GRAINS)
+    first["time"]["end"] = 2 * every
+    first["output"]["every"] = every
+    first["checkpoint"] = {"every": 1.0}  # only the one at the end
+    Simulation.from_dict(first, base_dir=tmp_path, output_dir=tmp_path / "extended").run(progress=False)
+    extended = copy.deepcopy(first)
+    extended["time"]["end"] = 4 * every
+    Simulation.from_dict(extended, base_dir=tmp_path, output_dir=tmp_path / "extended",
+                         restart=tmp_path / "extended" / "checkpoints" / "latest.h5").run(progress=False)
+    parts = read_history(tmp_path / "extended" / "history.csv")
+    assert list(parts["step"]) == [0, 5, 11, 15, 22]
+
+    stepped = Simulation.from_dict(extended, base_dir=tmp_path, output_dir=tmp_path / "stepped")
+    samples = []
+    for _ in range(15):
+        stepped.step(1)
+        samples.append(stepped.wall_force("floor")[2])
+    row = list(parts["step"]).index(15)
+    # The same forces summed over the same steps (the run's and this loop's steps agree bit for bit); the
+    # division and summation order leave round-off.
+    since_end_row = np.mean(samples[11:15])
+    assert parts["mean_force_floor_z"][row] == pytest.approx(since_end_row, rel=1e-12, abs=1e-15)
+    assert not np.isclose(np.mean(samples[5:15]), since_end_row, rtol=1e-3)  # the two intervals differ here
+
+
 def test_history_forces_are_means_over_the_output_interval(tmp_path):
     steps = 4 * STEPS_PER_ROW
     run = Simulation.from_dict(grains_scene(steps), base_dir=tmp_path, output_dir=tmp_path / "run")
