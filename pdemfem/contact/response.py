@@ -111,8 +111,9 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
 
     Returns (fx, fy, fz, mx, my, mz, elastic energy, dissipated energy this step, c_n, c_t): the
     dashpots' force on i is -(c_n n n^T + c_t (I - n n^T)) v; c_n is 0 when the dashpot was
-    clamped and c_t is 0 when the contact slides (the force is then not linear in v).  A
-    deformable surface applies the dashpot to its own nodes at its own rate (pdemfem.coupling.dampers).
+    clamped, and a sliding contact's c_t is the dashpot's share of the Coulomb-capped force (the cap's
+    factor times c_t: pdemfem.contact.tangential_mindlin).  A deformable surface applies the dashpot to its
+    own nodes at its own rate (pdemfem.coupling.dampers).
     """
     tangential_column, rolling_column, touching_column, width = history_layout(composition)
     model = int(coefficients[a, b, NORMAL_MODEL])

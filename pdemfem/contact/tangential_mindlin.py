@@ -30,7 +30,12 @@ def force(nx, ny, nz, vx, vy, vz, normal_speed, previous_vx, previous_vy, previo
     levers), previous_v the same velocity at the previous evaluation's geometry: the one the force applied
     then (history columns 3-5) worked on over the first half of this step.
 
-    c_t is 0 when the contact slides (the force is then not linear in v)."""
+    c_t in effect: sliding, the dashpot's share of the capped force (the cap's factor times c_t).  A deformable
+    surface applies that share to its nodes' own current velocity (pdemfem.coupling.dampers) and holds the
+    rest: with the whole capped force held, its dashpot part answered the surface velocity of the previous
+    interval and pumped energy into a ringing node (a 0.26 kg steel ball resting with friction on a POM beam's
+    surface node: the books' total rose with the booked dissipation until the beam blew up; with the share
+    applied to the node, the total stayed within 3e-7 J of 5.7e-5 J dissipated)."""
     tx = vx - normal_speed * nx
     ty = vy - normal_speed * ny
     tz = vz - normal_speed * nz
@@ -60,7 +65,7 @@ def force(nx, ny, nz, vx, vy, vz, normal_speed, previous_vx, previous_vy, previo
         # Sliding goes on as before: with xi scaled, the next step's force is again at least the cap while
         # the slip keeps its direction, and once the slip stops the spring holds the whole force.
         scale = friction_limit / math.sqrt(force_squared)
-        damping = 0.0
+        damping *= scale  # the dashpot's share of the capped force (docstring)
         fx *= scale
         fy *= scale
         fz *= scale

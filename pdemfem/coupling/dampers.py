@@ -10,7 +10,8 @@ velocity from the contact's relative velocity stops the growth (measured: larges
 speed 3e-3 m/s flat over 1 s instead of growing to 0.44 m/s), which locates the cause.
 
 What.  Per contact record the dashpot tensor C = c_n n n^T + c_t (I - n n^T) (c_n = 0 when
-the normal force was clamped, c_t = 0 when sliding), the particle's contact-point
+the normal force was clamped; sliding, c_t is the dashpot's share of the Coulomb-capped force: the cap's
+factor times c_t, pdemfem.contact.tangential_mindlin), the particle's contact-point
 velocity u_p and the surface velocity s_prev the DEM step used.  The solid receives
 
 * the contact force without its dashpot part, held over the interval as before, and
