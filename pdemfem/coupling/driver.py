@@ -176,14 +176,19 @@ class CouplingDriver(kinds.StateComponent):
 
     def load_state_dict(self, state: dict) -> None:
         """After the solids and surfaces (which restart their rank-local dashpot sums at zero): on as many ranks
-        as the checkpoint's, each rank takes up its own running sums; otherwise the dissipation up to the
-        checkpoint is booked once, on rank 0's first surface."""
+        as the checkpoint's, each rank takes up its own running sums; on another rank count rank 0 takes their
+        sums over the checkpoint's ranks (each sum keeps its size: the dissipation is their difference, which
+        cancels most of their digits); from a checkpoint without them, the dissipation up to the checkpoint is
+        booked once, on rank 0's first surface."""
         self.steps_since_advance = int(state["steps_since_advance"])
         self.advances = int(state["advances"])
         self.fem_substeps.update({name: int(count) for name, count in state["fem_substeps"].items()})
         by_rank = np.asarray(state.get("dashpot_sums_by_rank", np.zeros((0, 0))), dtype=float)
-        if by_rank.ndim == 2 and by_rank.shape == (self.comm.size, len(self._dashpot_sums())):
-            sums = by_rank[self.comm.rank]
+        if by_rank.ndim == 2 and by_rank.shape[1:] == (len(self._dashpot_sums()),):
+            if by_rank.shape[0] == self.comm.size:
+                sums = by_rank[self.comm.rank]
+            else:
+                sums = by_rank.sum(axis=0) if self.comm.rank == 0 else np.zeros(by_rank.shape[1])
             for surface, value in zip(self.surfaces, sums):
                 surface.dissipation_correction_local = float(value)
             for solid, value in zip(self.solids.values(), sums[len(self.surfaces):]):
