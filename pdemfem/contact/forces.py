@@ -337,7 +337,7 @@ def plane_wall_forces(candidate_particles, candidate_walls, wall_points, wall_no
             composition, coefficients, material_index[i], wall_material[w], nx, ny, nz, distance,
             wall_velocities[w, 0], wall_velocities[w, 1], wall_velocities[w, 2], velocities[i, 0], velocities[i, 1],
             velocities[i, 2], angular_velocities[i, 0], angular_velocities[i, 1], angular_velocities[i, 2], radius,
-            mass[i], inverse_inertia[i], history, row, dt)
+            radius, mass[i], inverse_inertia[i], history, row, dt)
         add_particle_loads(forces, torques, i, fx, fy, fz, tx, ty, tz)
         elastic_total += elastic
         dissipated_total += dissipated

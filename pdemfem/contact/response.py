@@ -186,12 +186,14 @@ def contact_response(composition, coefficients, a, b, nx, ny, nz, overlap, vx, v
 
 @njit(inline="always", cache=True)
 def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz, distance, surface_vx, surface_vy,
-                       surface_vz, vx, vy, vz, wx, wy, wz, radius, mass, inverse_inertia, history, slot, dt):
+                       surface_vz, vx, vy, vz, wx, wy, wz, radius, contact_radius, mass, inverse_inertia, history, slot,
+                       dt):
     """Contact of a particle (velocity v, spin w, radius, mass, inverse inertia; scalars) with a rigid wall
     (R = inf, m = inf): plane, cylinder or triangle.
 
     n is the wall's normal at the contact point, which lies `distance` below the centre along -n and moves
-    with the surface velocity.  Returns (fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, c_n, c_t):
+    with the surface velocity.  contact_radius: the contact's R* (the particle's radius on flat and concave
+    walls; r R / (r + R) outside a cylinder of radius R).  Returns (fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, c_n, c_t):
     the force on the particle (the wall gets the opposite), its torque about the particle's centre (the
     force's moment and the rolling couple), the rolling couple alone, the contact's energies and its dashpot
     coefficients.  The caller adds force and torque to the particle's rows (add_particle_loads): with the
@@ -214,7 +216,7 @@ def rigid_wall_contact(composition, coefficients, material, wall_row, nx, ny, nz
     previous_z = relative_z + receded * (wx * ny - wy * nx)
     fx, fy, fz, mx, my, mz, elastic, dissipated, normal_damping, tangential_damping = contact_response(
         composition, coefficients, material, wall_row, nx, ny, nz, radius - distance, relative_x, relative_y,
-        relative_z, previous_x, previous_y, previous_z, wx, wy, wz, mass, radius, effective_inertia, rolling_inertia,
+        relative_z, previous_x, previous_y, previous_z, wx, wy, wz, mass, contact_radius, effective_inertia, rolling_inertia,
         history, slot, dt, True)
     tx = -lever * (ny * fz - nz * fy) + mx
     ty = -lever * (nz * fx - nx * fz) + my

@@ -53,6 +53,9 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
     ez = direction[2]
     for i in range(first, last):
         radius = radii[i]
+        # The contact's R*: outside (a post or roller) the two curvatures add, r R / (r + R); inside (a drum) the
+        # wall convention R* = r (the concave mantle's r R / (R - r) is within r / R of it).
+        contact_radius = radius if inside else radius * cylinder_radius / (radius + cylinder_radius)
         rx = positions[i, 0] - point[0]
         ry = positions[i, 1] - point[1]
         rz = positions[i, 2] - point[2]
@@ -80,7 +83,7 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
             touching = distance < radius
             if not touching and composition & COHESIVE:
                 touching = cohesive_contact_holds(composition, coefficients, material_index[i], wall_row,
-                                                  radius - distance, radius, rows, i)
+                                                  radius - distance, contact_radius, rows, i)
         if not touching:
             in_use = False
             for column in range(overlap_column):
@@ -88,7 +91,7 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
                     in_use = True
             if in_use:
                 dissipated_total += released_energy(composition, coefficients, material_index[i], wall_row,
-                                                    rows[i, overlap_column], mass[i], radius, rows, i)
+                                                    rows[i, overlap_column], mass[i], contact_radius, rows, i)
             for column in range(overlap_column + 1):
                 rows[i, column] = 0.0
             continue
@@ -106,7 +109,7 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         fx, fy, fz, tx, ty, tz, mx, my, mz, elastic, dissipated, _, _ = rigid_wall_contact(
             composition, coefficients, material_index[i], wall_row, nx, ny, nz, distance, sx, sy, sz,
             velocities[i, 0], velocities[i, 1], velocities[i, 2], angular_velocities[i, 0], angular_velocities[i, 1],
-            angular_velocities[i, 2], radius, mass[i], inverse_inertia[i], rows, i, dt)
+            angular_velocities[i, 2], radius, contact_radius, mass[i], inverse_inertia[i], rows, i, dt)
         add_particle_loads(forces, torques, i, fx, fy, fz, tx, ty, tz)
         rows[i, overlap_column] = radius - distance  # this step's overlap
         elastic_total += elastic
@@ -121,7 +124,7 @@ def cylinder_forces(first, last, point, direction, cylinder_radius, inside, velo
         totals[5] += -(qx * fy - qy * fx) - mz
         if conducting:
             conductance = contact_conductance(composition, coefficients, material_index[i], wall_row,
-                                              radius - distance, mass[i], radius)
+                                              radius - distance, mass[i], contact_radius)
             flow = conductance * (wall_temperature - temperatures[i])
             heat_flows[i, 0] += flow
             heat_flows[i, 1] += conductance

@@ -587,7 +587,7 @@ def mesh_contact_forces(first, last, candidate_offsets, candidate_triangles,
                 rigid_wall_contact(composition, coefficients, material_index[i], wall_material, nx, ny, nz, distance,
                                    sx, sy, sz, velocities[i, 0], velocities[i, 1], velocities[i, 2],
                                    angular_velocities[i, 0], angular_velocities[i, 1], angular_velocities[i, 2],
-                                   radius, mass[i], inverse_inertia[i], history, slot, dt))
+                                   radius, radius, mass[i], inverse_inertia[i], history, slot, dt))
             add_particle_loads(forces, torques, i, fx, fy, fz, tx, ty, tz)
             if blend_applied:
                 # Split the force: the normal elastic part f_el n acts as the blended potential's gradient (on the
