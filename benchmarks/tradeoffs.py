@@ -69,7 +69,7 @@ KNOBS = ("steps_per_contact", "contact_model", "rolling_friction", "verlet_skin"
 
 # ----------------------------------------------------------------------------- settings (full / quick)
 FULL = {
-    "steps_per_contact": [3, 6, 14, 28, 56, 142, 300],
+    "steps_per_contact": [3, 6, 14, 28, 56, 159, 300],
     "touch_phases": 8,
     "restitutions": [0.2, 0.5],
     "model_speeds": [0.1, 1.0, 10.0],
@@ -87,7 +87,7 @@ FULL = {
     "ranks": [1, 2],
 }
 QUICK = {
-    "steps_per_contact": [3, 14, 142],
+    "steps_per_contact": [3, 14, 159],
     "touch_phases": 2,
     "restitutions": [0.2],
     "model_speeds": [0.1, 1.0, 10.0],
