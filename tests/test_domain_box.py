@@ -136,3 +136,28 @@ def test_a_clump_leaving_right_after_a_restart_is_booked_once(tmp_path):
     assert whole["lost_energy"][-1] > 0
     # The same energy whatever the ranks hold: the sums over the ranks may add in another order (round-off).
     assert again["lost_energy"][-1] == pytest.approx(whole["lost_energy"][-1], rel=1e-12)
+
+
+def test_a_periodic_scene_without_particles_runs_as_check_accepts_it(tmp_path, capsys):
+    """A solid and a floor alone (the particles of a scene taken out to look at the solid) in a periodic domain:
+    check said 'scene OK' and run refused it, comparing the period with a cutoff made of no particle's
+    diameter and a default skin (0.3 m)."""
+    import yaml
+
+    from pdemfem import cli
+
+    scene = {"time": {"end": 2e-4, "dt": "auto"}, "gravity": [0, 0, -9.81],
+             "materials": {"glass": {"density": 2500, "youngs_modulus": 1.0e7, "poisson_ratio": 0.3}},
+             "interactions": {"default": {"restitution": 0.5, "friction": 0.5}},
+             "particles": [],
+             "walls": [{"name": "floor", "kind": "plane", "point": [0, 0, 0], "normal": [0, 0, 1],
+                        "material": "glass"}],
+             "solids": [{"name": "plate", "mesh": {"box": [[0, 0, -0.004], [0.01, 0.01, -0.001]], "cells": [4, 4, 1]},
+                         "material": "glass", "fixed": ["zmin"], "contact": ["zmax"]}],
+             "domain": {"box": [[-0.01, -0.01, -0.01], [0.02, 0.02, 0.05]], "periodic": ["y"]},
+             "output": {"particles": [], "solids": []}}
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    assert cli.main(["check", str(path)]) == 0
+    code = cli.main(["run", str(path), "--quiet", "-o", str(tmp_path / "out")])
+    assert code == 0, capsys.readouterr().err

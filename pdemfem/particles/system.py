@@ -178,6 +178,8 @@ class ParticleSystem(kinds.StateComponent):
     def _check_periodic_lengths(self):
         from pdemfem.errors import SceneError
 
+        if self.largest_radius == 0.0:
+            return  # no particle now or later (streams count): nothing can touch its own image, as check says
         for axis in range(3):
             length = self.periodic_lengths[axis]
             if 0 < length <= 2.0 * self.ghost_cutoff:
