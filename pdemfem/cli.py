@@ -544,7 +544,7 @@ def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tup
     else:
         rayleigh_text = f" = {dt / rayleigh:.3g} x Rayleigh time {rayleigh:.3g} s" if rayleigh else ""
         lines.append(f"time step: dt = {dt:.3g} s (given{rayleigh_text})")
-    steps = math.ceil(scene.time.end / dt - 1e-9)  # the count `run` takes (Simulation.run)
+    steps = derived.steps_to_end(scene.time.end, dt)  # the count `run` takes (Simulation.run)
     lines.append(f"steps: {steps} to time.end = {scene.time.end:g} s")
     streams = any(group.insert.kind == "stream" for group in scene.particles)
     if total or streams:

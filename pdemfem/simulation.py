@@ -284,7 +284,7 @@ class Simulation:
         from pdemfem.io.signals import STOP_CHECK_EVERY, StopRequest
 
         end = self.scene.time.end
-        total_steps = int(math.ceil(end / self.dt - 1e-9))
+        total_steps = derived.steps_to_end(end, self.dt)
         steps_per_output = self._steps_per(self.output_interval)
         every = self.scene.checkpoint.every
         steps_per_checkpoint = self._steps_per(every) if every else None
@@ -342,7 +342,7 @@ class Simulation:
         then takes the place of that interval's scheduled row."""
         end, interval = self.scene.time.end, self.output_interval
         intervals = round(end / interval)
-        return (step == int(math.ceil(end / self.dt - 1e-9)) and intervals >= 1
+        return (step == derived.steps_to_end(end, self.dt) and intervals >= 1
                 and abs(intervals * interval - end) <= 0.5 * self.dt)
 
     def _guarded(self, check) -> None:
@@ -381,6 +381,8 @@ class Simulation:
             columns += ["thermoelastic_work"]
         if self._prescribed_solids():
             columns += ["support_work"]
+        if self._damped_solids():
+            columns += ["damping_dissipated"]
         if self._moving_solids():
             columns += ["frame_work"]
         if self._free_axle_solids():
@@ -535,6 +537,10 @@ class Simulation:
         energies["wall_work"] += sum(wall.work for wall in self.contributor_walls)
         if self.solids:
             energies["dissipated_energy"] += self.dashpot_dissipation()
+        if self._damped_solids():
+            # What the solids' Rayleigh damping took from their elastic motion: dissipated, as the contacts' is.
+            energies["damping_dissipated"] = sum(self.solids[name].damping_work for name in self._damped_solids())
+            energies["dissipated_energy"] += energies["damping_dissipated"]
         energies["solid_kinetic_energy"] = sum(solid.kinetic_energy() for solid in self.solids.values())
         energies["solid_strain_energy"] = sum(solid.strain_energy() for solid in self.solids.values())
         # Potential of the solids' constant loads (gravity, tractions, point forces): -b . u.
@@ -585,6 +591,9 @@ class Simulation:
 
     def _prescribed_solids(self) -> list:
         return [config.name for config in self.scene.solids if config.prescribed]
+
+    def _damped_solids(self) -> list:
+        return [name for name, solid in self.solids.items() if solid.damping_alpha != 0.0 or solid.damping_beta != 0.0]
 
     def _moving_solids(self) -> list:
         return [name for name, solid in self.solids.items() if solid.frame is not None]

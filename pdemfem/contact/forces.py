@@ -44,7 +44,6 @@ def set_apart_buffer():
     return np.empty((3, SET_APART_CAPACITY), dtype=np.int64)
 
 
-@njit(cache=True, fastmath=CONTRACT)
 def pair_forces(row_particles, pair_starts, pair_ends, neighbor_partners, pair_history, ids, owned_count,
                 positions, velocities, angular_velocities, radii, mass, inverse_inertia, material_index,
                 coefficients, composition, dt, forces, torques, temperatures, heat_flows, set_apart=None):
@@ -64,14 +63,18 @@ def pair_forces(row_particles, pair_starts, pair_ends, neighbor_partners, pair_h
     set_apart (set_apart_buffer(); the results are the same without it, in the last bits): the contacts'
     first evaluations, which apply the dashpot's onset factor (pdemfem.contact.response.dashpot_onset), are set
     apart there and computed after the others.  The factor's code, inlined for every contact, cost the settled
-    bed's loop 13-16 %, though 12 of its 65,400 contacts were first evaluations.
+    bed's loop 13-16 %, though 12 of its 65,400 contacts were first evaluations.  The two passes are called from
+    here, not from a compiled wrapper: compiled into one, the pair loop's first compile took 26.5 s against 7.2 s
+    for the loop alone (the compiler compiled each specialization again inside the wrapper); from Python the
+    loop with and without set_apart compile once each, and the second call is made only when there are first
+    evaluations.
     """
     elastic_total = 0.0
     dissipated_total = 0.0
     contacts = 0
     deepest = 0.0
     resume_row = 0
-    resume_slot = pair_starts[0] if pair_starts.shape[0] else 0
+    resume_slot = pair_starts[0] if len(pair_starts) else 0
     while True:
         elastic, dissipated, count, deepest_here, set_apart_count, resume_row, resume_slot = _pair_loop(
             row_particles, pair_starts, pair_ends, neighbor_partners, pair_history, ids, owned_count, positions,
@@ -93,7 +96,7 @@ def pair_forces(row_particles, pair_starts, pair_ends, neighbor_partners, pair_h
             dissipated_total += dissipated
             contacts += count
             deepest = max(deepest, deepest_here)
-        if resume_row >= row_particles.shape[0]:
+        if resume_row >= len(row_particles):
             break
     return elastic_total, dissipated_total, contacts, deepest
 

@@ -242,9 +242,11 @@ def cell_stresses(coords, cells, n_cells, displacement, delta_t, centroid_grads,
 
 @njit(cache=True)
 def central_difference_update(u, v, acceleration, internal, base_load, nodal_load, load, inverse_mass, constrained,
-                              prescribed_velocity, dt, decay, gain, lumped, clear_nodal):
-    """One explicit step on owned dofs (flat arrays); returns this rank's increments of the external work and
-    of the supports' work alone, and the supports' work over the second half of this step.
+                              prescribed_velocity, dt, decay, gain, lumped, clear_nodal, mass_damping, lumped_mass,
+                              stiffness_damping_force):
+    """One explicit step on owned dofs (flat arrays); returns this rank's increments of the external work, of the
+    supports' work alone and of the work the Rayleigh damping took, and the supports' work over the second half
+    of this step.
 
     load = base_load + nodal_load (nodal_load then cleared when asked); M a = load - internal at free dofs (a = (load - internal) * inverse_mass when lumped, else
     `acceleration` holds the solve's result); v+ = decay * v + gain * dt * a; constrained dofs take
@@ -255,10 +257,17 @@ def central_difference_update(u, v, acceleration, internal, base_load, nodal_loa
     centred on u^n while the strain energy is read at u^{n+1}: the reaction's work over the half step
     dt v+ / 2 closes the gap (without it the books lag by the current reaction's work over half a step, which
     grows with the reaction).
+
+    The damping's forces at free dofs, on the same increment: alpha M (v- + v+) / 2 (the decay and gain
+    factors; mass_damping = alpha with lumped mass, 0 with consistent mass, whose term the caller books with
+    the consistent M) and beta K v- (stiffness_damping_force, inside `internal`; empty without beta).  With
+    them booked, central difference's modified energy plus the damping's work is conserved to round-off.
     """
     work = 0.0
     support_work = 0.0
     support_half_step = 0.0
+    damping_work = 0.0
+    stiffness_damping = stiffness_damping_force.shape[0] > 0
     for i in range(u.shape[0]):
         f = base_load[i] + nodal_load[i]
         load[i] = f  # kept for reactions
@@ -277,11 +286,15 @@ def central_difference_update(u, v, acceleration, internal, base_load, nodal_loa
                 a = acceleration[i]
             v_new = decay * v[i] + gain * dt * a
             force = f
+            damping_force = mass_damping * lumped_mass[i] * 0.5 * (v[i] + v_new)
+            if stiffness_damping:
+                damping_force += stiffness_damping_force[i]
+            damping_work += damping_force * 0.5 * dt * (v[i] + v_new)
         acceleration[i] = a
         work += force * 0.5 * dt * (v[i] + v_new)
         v[i] = v_new
         u[i] += dt * v_new
-    return work, support_work, support_half_step
+    return work, support_work, support_half_step, damping_work
 
 
 @njit(cache=True)

@@ -42,6 +42,7 @@ MASS_SOLVE_PREFIX = "fem_mass_"
 # already errs by ~(omega dt)^2/24 per step in phase; for the modes that carry the physics
 # (omega dt < 1e-2) that is ~1e-6, so 1e-8 keeps the solve below the integrator's own error.
 MASS_SOLVE_RTOL = 1e-8
+_NO_DAMPING_FORCE = np.zeros(0)  # the central-difference kernel's stiffness damping force without beta
 BLOWUP_CHECK_EVERY = 16  # steps between the (cheap, one norm) divergence checks
 # A node's contact dashpot, symmetric D (6) and target g (3), force g - D v; then its contact spring over the
 # sub-steps, symmetric S (6), force -S (u - u0) with u0 its displacement at the start of the advance.
@@ -153,6 +154,8 @@ class Solid(kinds.StateComponent):
         self.damper_work_local = 0.0  # work of the contact dashpots on this rank's nodes since construction [J]
         self._base_load_vec = self.stiffness.createVecRight()  # constant + thermal
         self._work_vec = self.stiffness.createVecRight()
+        # beta K v- (stiffness damping), and M v-bar for the work of alpha damping with consistent mass.
+        self._stiffness_damping_vec = self.stiffness.createVecRight()
         self.coordinates_vec = self.stiffness.createVecRight()
         self.coordinates_vec.setArray(mesh.points[: self.n_owned_nodes].ravel())
         self.temperature_vec = ghosted_vector(comm, mesh, 1)
@@ -197,6 +200,8 @@ class Solid(kinds.StateComponent):
         self._support_work_summed = 0.0
         self._support_work_local = 0.0
         self._support_half_step = 0.0  # this rank's: the supports' work over the second half of the last step
+        self._damping_work_summed = 0.0  # the Rayleigh damping's work, as the external work's
+        self._damping_work_local = 0.0
         self._thermal_energy = 0.0
         self.heat = None  # the heat equation (heat.SolidHeat) when this solid conducts heat
         self.thermoelastic_work = 0.0  # strain energy the temperature changes of the heat path put in [J]
@@ -538,10 +543,18 @@ class Solid(kinds.StateComponent):
             self._frame_base_vec.waxpy(1.0, self._base_load_vec, self._frame_load_vec)
             base_load = self._frame_base_vec
         if self.damping_beta != 0.0:
-            self._work_vec.waxpy(self.damping_beta, self.velocity_vec, self.displacement_vec)
-            self.stiffness.mult(self._work_vec, self.internal_force_vec)
+            # beta K v- apart from K u: the damping's work is booked with it (a second product, only with beta).
+            self.stiffness.mult(self.velocity_vec, self._stiffness_damping_vec)
+            self._stiffness_damping_vec.scale(self.damping_beta)
+            self.stiffness.mult(self.displacement_vec, self.internal_force_vec)
+            self.internal_force_vec.axpy(1.0, self._stiffness_damping_vec)
+            stiffness_damping_force = self._stiffness_damping_vec.getArray(readonly=True)
         else:
             self.stiffness.mult(self.displacement_vec, self.internal_force_vec)
+            stiffness_damping_force = _NO_DAMPING_FORCE
+        consistent_mass_damping = not self.lumped and self.damping_alpha != 0.0
+        if consistent_mass_damping:
+            velocity_before_step = self.velocity_vec.getArray(readonly=True).copy()
         if not self.lumped:
             self.load_vec.waxpy(1.0, self._base_load_vec, self.nodal_force_vec)
             self._solve_consistent_mass()
@@ -549,12 +562,16 @@ class Solid(kinds.StateComponent):
         decay, gain = (1.0 - half_alpha) / (1.0 + half_alpha), 1.0 / (1.0 + half_alpha)
         # getArray() views: petsc4py restores (and bumps the state of) each Vec before the kernel writes
         # in place, and nothing reads a cached norm in between, so no copies are needed.
-        work, support_work, self._support_half_step = kernels.central_difference_update(
+        work, support_work, self._support_half_step, damping_work = kernels.central_difference_update(
             self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
             self.internal_force_vec.getArray(readonly=True), base_load.getArray(readonly=True),
             self.nodal_force_vec.getArray(), self.load_vec.getArray(), self._inverse_lumped_mass, self._constrained,
             self._prescribed_velocity, dt, decay, gain, self.lumped, clear_nodal,
+            self.damping_alpha if self.lumped else 0.0, self._lumped_mass_values, stiffness_damping_force,
         )
+        if consistent_mass_damping:
+            damping_work += self._consistent_mass_damping_work(velocity_before_step, dt)
+        self._damping_work_local += damping_work
         if len(self._damped_nodes):
             self.damper_work_local += kernels.apply_contact_dampers(
                 self.displacement_vec.getArray(), self.velocity_vec.getArray(), self.acceleration_vec.getArray(),
@@ -574,6 +591,15 @@ class Solid(kinds.StateComponent):
         self.step_count += 1
         if self.step_count % BLOWUP_CHECK_EVERY == 0:
             self._check_divergence(dt)
+
+    def _consistent_mass_damping_work(self, velocity_before_step: np.ndarray, dt: float) -> float:
+        """This rank's share of the step's work of alpha M v-bar with the consistent M, on the free dofs'
+        increment dt v-bar (v-bar = (v- + v+) / 2, zero at constrained dofs, whose rows the mass solve holds)."""
+        values = 0.5 * (velocity_before_step + self.velocity_vec.getArray(readonly=True))
+        values[self._constrained] = 0.0
+        self._work_vec.setArray(values)  # (the mass solve's residual: free again after the step)
+        self.consistent_mass.mult(self._work_vec, self._stiffness_damping_vec)
+        return self.damping_alpha * dt * float(np.dot(values, self._stiffness_damping_vec.getArray(readonly=True)))
 
     def _solve_consistent_mass(self) -> None:
         if self._mass_solver is None:
@@ -640,6 +666,14 @@ class Solid(kinds.StateComponent):
         self._support_work_summed += float(summed[0])
         self._support_work_local = 0.0
         return self._support_work_summed, float(summed[1])
+
+    @property
+    def damping_work(self) -> float:
+        """Collective: energy [J] the Rayleigh damping (alpha M + beta K) took from the elastic motion since
+        construction, summed over the ranks (0 without damping)."""
+        self._damping_work_summed += _sum(self.comm, self._damping_work_local)
+        self._damping_work_local = 0.0
+        return self._damping_work_summed
 
     @property
     def frame_work(self) -> float:
@@ -722,6 +756,7 @@ class Solid(kinds.StateComponent):
         booked, half_step = self._settle_support_work()
         state["support_work"] = kinds.scalar(booked)
         state["support_half_step"] = kinds.scalar(half_step)
+        state["damping_work"] = kinds.scalar(float(self.damping_work))
         if self.frame is not None:
             state["frame_work"] = kinds.scalar(float(self.frame_work))
             state["frame"] = {key: kinds.scalar(float(value)) for key, value in self.frame.state().items()}
@@ -748,6 +783,7 @@ class Solid(kinds.StateComponent):
         # The last step's half, held by rank 0 alone: the sum over the ranks reads it back unchanged.
         self._support_half_step = float(state["support_half_step"]) if self.comm.rank == 0 else 0.0
         self._support_work_summed, self._support_work_local = float(state["support_work"]), 0.0
+        self._damping_work_summed, self._damping_work_local = float(state["damping_work"]), 0.0
         if (self.frame is None) != ("frame_work" not in state):
             here, there = ("has no", "has") if self.frame is None else ("has", "has no")
             raise kinds.StateMismatch(f"solid '{self.name}' {here} motion: in this scene, it {there} in the checkpoint")

@@ -86,14 +86,14 @@ from pdemfem.errors import CheckpointError
 from pdemfem.io import xdmf
 from pdemfem.io.output_guard import DIVERGED_SUFFIX, agree_on_error, write_error_text
 
-# 6: a solid's prescribed groups' work (support_work and its last half step).  5: the rolling spring's history holds the moment the contact applied at the last evaluation too (6 columns, not
+# 7: a solid's Rayleigh damping work.  6: a solid's prescribed groups' work (support_work and its last half step).  5: the rolling spring's history holds the moment the contact applied at the last evaluation too (6 columns, not
 # 3).  4: the tangential history holds the force the contact applied at the last evaluation too (6 columns, not 3:
 # the contact records of a version-3 file do not fit).  3: the plane walls' contact history is stored among the
 # contact records (partner key -1 - wall), no longer as a per-particle field (a version-2 file read now would
 # lose it).  2: the simulation's state
 # is stored as its components' state dicts (a JSON manifest maps each dataset and scalar to its
 # component path and kind); version 1 named the datasets by field.
-FORMAT_VERSION = 6
+FORMAT_VERSION = 7
 MANIFEST = "state_manifest"
 MARKER = "pdemfem_checkpoint"
 LATEST = "latest.h5"

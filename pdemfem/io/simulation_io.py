@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import csv
 import logging
-import math
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +45,7 @@ from pdemfem.errors import CheckpointError, OutputError
 from pdemfem.io import checkpoint as ckpt
 from pdemfem.io.history import HistoryWriter
 from pdemfem.io.output_guard import agree_on_error, prepare_output, write_error_text
+from pdemfem.scene.derived import steps_to_end
 from pdemfem.scene.loader import input_files, resolve_path, scene_hash, scene_physics
 from pdemfem.state_dict import StateMismatch
 
@@ -309,7 +309,7 @@ class SimulationIO:
         refusal = ckpt.physics_refusal(attributes, scene_hash(sim.scene), force, scene_physics(sim.scene))
         if refusal is not None:
             raise CheckpointError(where, *refusal)
-        total_steps = int(math.ceil(sim.scene.time.end / sim.dt - 1e-9))  # as Simulation.run
+        total_steps = steps_to_end(sim.scene.time.end, sim.dt)  # as Simulation.run
         if step >= total_steps:
             raise CheckpointError(where, f"was written at step {step} (t = {step * sim.dt:.6g} s), at or past "
                                          f"time.end = {sim.scene.time.end:g} s ({total_steps} steps): there is "

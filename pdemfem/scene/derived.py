@@ -343,6 +343,12 @@ def time_step(scene: Scene, solid_critical_step: Optional[float] = None, base_di
     return dt
 
 
+def steps_to_end(end: float, dt: float) -> int:
+    """The steps a run takes to time.end: the last one may end past it by less than a step (the 1e-9: an end
+    that is a whole number of steps, up to the division's round-off, takes that number)."""
+    return int(math.ceil(end / dt - 1e-9))
+
+
 def solids_critical_step(scene: Scene, base_dir=None) -> Optional[float]:
     """Smallest FE critical step over the scene's solids (builds them on this process only)."""
     if not scene.solids:
