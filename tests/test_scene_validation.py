@@ -125,6 +125,16 @@ BAD_SCENES = {
         lambda s: s.update(gravity=[0, -9.81]),
         "gravity", "too few values", "[x, y, z]",
     ),
+    # A solid's series goes to <name>.h5 / .xdmf: "particles" overwrote the particles' series without a word.
+    "solid named as the particle series": (
+        lambda s: s.update(solids=[{"name": "particles", "mesh": {"box": [[0, 0, -0.01], [0.05, 0.05, 0]],
+                                                                  "cells": [1, 1, 1]}, "material": "glass"}]),
+        "solids[0].name", "particles.h5 and particles.xdmf", "rename the solid",
+    ),
+    "name with a path separator": (
+        lambda s: s["walls"][0].update(name="walls/floor"),
+        "walls[0].name", "may hold only letters, digits", "rename it",
+    ),
 }
 
 

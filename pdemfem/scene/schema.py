@@ -7,6 +7,7 @@ errors into one message per problem that names the key path and the fix.
 from __future__ import annotations
 
 import difflib
+import re
 from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
 from pydantic import Field, PrivateAttr, field_validator, model_validator
@@ -15,6 +16,10 @@ from pdemfem.config_types import Box, NonNegativeFloat, PositiveFloat, StrictMod
 from pdemfem.contact.registry import NORMAL_BY_NAME, ROLLING_BY_NAME
 from pdemfem.fem.config import SolidConfig
 
+# Names of particle groups, walls, solids and outlets: they go into history columns (force_<name>_x) and a
+# solid's into its output files' names (<name>.h5), so no separators, commas or path parts.
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]*")
+SERIES_NAMES = ("particles", "clumps")  # the particle and clump series' files in the output directory
 NORMAL_MODEL_NAMES = tuple(NORMAL_BY_NAME)
 ROLLING_MODEL_NAMES = tuple(ROLLING_BY_NAME)
 
@@ -503,6 +508,17 @@ class Scene(StrictModel):
         for index, solid in enumerate(self.solids):
             if solid.material not in known:
                 raise ValueError(_unknown_material(f"solids[{index}].material", solid.material, known))
+        for kind, items in (("particles", self.particles), ("walls", self.walls), ("solids", self.solids),
+                            ("outlets", self.outlets)):
+            for index, item in enumerate(items):
+                if not NAME_PATTERN.fullmatch(item.name):
+                    raise ValueError(f"{kind}[{index}].name: {item.name!r} may hold only letters, digits, '_', '-' and "
+                                     f"'.' (not first): it names history columns, and a solid's output files; rename it")
+        for index, solid in enumerate(self.solids):
+            if solid.name in SERIES_NAMES:
+                raise ValueError(f"solids[{index}].name: '{solid.name}' is taken: {solid.name}.h5 and {solid.name}.xdmf "
+                                 f"in the output directory hold the {solid.name} series, which the solid's would "
+                                 f"overwrite; rename the solid")
         surface_names = [wall.name for wall in self.walls] + [solid.name for solid in self.solids]
         clashes = sorted({name for name in surface_names if surface_names.count(name) > 1})
         if clashes:
