@@ -18,6 +18,7 @@ from numba import njit
 from pdemfem.clumps.insert import place_clump_group
 from pdemfem.errors import SceneError
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
+from pdemfem.particles.periodic_images import PeriodicBox
 from pdemfem.particles.placement_grid import overlaps_stored, store_sphere
 from pdemfem.scene.inputs import START_OVERLAP_TOLERANCE
 
@@ -78,12 +79,20 @@ def _first_overlap(positions, radii, labels, cells, starts, dimensions, toleranc
     return -1, -1
 
 
-def first_overlap(positions: np.ndarray, radii: np.ndarray, labels=None, tolerance: float = OVERLAP_TOLERANCE):
+def first_overlap(positions: np.ndarray, radii: np.ndarray, labels=None, tolerance: float = OVERLAP_TOLERANCE,
+                  periodic_box=None):
     """Indices (i, j) of some pair overlapping by more than `tolerance` of the smaller radius, or None.
-    `labels`: clump of each sphere (-1: none); members of one clump are not a pair."""
+    `labels`: clump of each sphere (-1: none); members of one clump are not a pair.  `periodic_box`
+    (periodic_images.PeriodicBox): on its periodic axes the pairs are also tested through the faces."""
     if len(radii) < 2:
         return None
     labels = np.full(len(radii), -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
+    if periodic_box is not None:
+        positions = periodic_box.wrapped(positions)
+        images, sources = periodic_box.images(positions, 2.0 * float(radii.max()))
+        rows = np.concatenate([np.arange(len(radii)), sources])
+        overlap = first_overlap(np.concatenate([positions, images]), radii[rows], labels[rows], tolerance)
+        return None if overlap is None else (int(rows[overlap[0]]), int(rows[overlap[1]]))
     lower, size, dimensions = cell_grid(positions, 2.0 * float(radii.max()))
     cells = cell_indices(positions, lower, size, dimensions)
     order = np.argsort(cells, kind="stable")
@@ -185,6 +194,7 @@ def insert_particles(scene) -> InsertedParticles:
     placed_positions = np.zeros((0, 3))
     placed_radii = np.zeros(0)
     placed_labels = np.zeros(0, dtype=np.int64)
+    periodic_box = PeriodicBox.from_scene(scene)
     for index, group in enumerate(scene.particles):
         where = f"particles[{index}].insert"
         insert = group.insert
@@ -222,7 +232,8 @@ def insert_particles(scene) -> InsertedParticles:
             if insert.kind == "lattice":
                 group_positions = _lattice_positions(group, where, rng)
             else:
-                group_positions = _random_positions(group, group_radii, placed_positions, placed_radii, where)
+                group_positions = _random_positions(group, group_radii, placed_positions, placed_radii, where,
+                                                    periodic_box)
         if group_labels is None:
             group_labels = np.full(count, -1, dtype=np.int64)
             member_body.append(group_labels)
@@ -234,10 +245,11 @@ def insert_particles(scene) -> InsertedParticles:
             # Listed positions may carry a settled packing's contact overlaps (1e-3..1e-2 radii), as against a
             # wall (pdemfem.scene.inputs); deeper ones would shoot the pair apart at step 0.
             overlap = first_overlap(combined_positions, combined_radii, combined_labels,
-                                    START_OVERLAP_TOLERANCE if insert.kind == "list" else OVERLAP_TOLERANCE)
+                                    START_OVERLAP_TOLERANCE if insert.kind == "list" else OVERLAP_TOLERANCE,
+                                    periodic_box)
             if overlap is not None:
                 raise SceneError(where, _describe_overlap(scene, overlap, combined_positions, combined_radii,
-                                                          insert.kind == "list"),
+                                                          insert.kind == "list", periodic_box),
                                  "move the positions apart (distance >= sum of radii) or shrink the radii"
                                  if group.clump is None else
                                  "move the clumps apart (their spheres must not overlap another clump's), or turn "
@@ -262,9 +274,15 @@ def insert_particles(scene) -> InsertedParticles:
                              np.concatenate(member_offsets), clumps)
 
 
-def _random_positions(group, radii, placed_positions, placed_radii, where):
+def _random_positions(group, radii, placed_positions, placed_radii, where, periodic_box=None):
     insert = group.insert
     low, high = (np.array(corner, dtype=float) for corner in insert.region.box)
+    if periodic_box is not None and len(placed_radii):
+        # The earlier groups' particles near a periodic face also stand beyond the opposite one.
+        placed_positions = periodic_box.wrapped(placed_positions)
+        images, sources = periodic_box.images(placed_positions, 2.0 * float(max(radii.max(), placed_radii.max())))
+        placed_positions = np.concatenate([placed_positions, images])
+        placed_radii = np.concatenate([placed_radii, placed_radii[sources]])
     largest = float(max(radii.max(), placed_radii.max() if len(placed_radii) else 0.0))
     if np.any(high - low < 2.0 * radii.max()):
         raise SceneError(f"{where}.region.box", "the region is thinner than one particle diameter",
@@ -284,10 +302,18 @@ def _random_positions(group, radii, placed_positions, placed_radii, where):
     return positions
 
 
-def _describe_overlap(scene, overlap, positions, radii, listed=False):
+def _describe_overlap(scene, overlap, positions, radii, listed=False, periodic_box=None):
     i, j = overlap
-    distance = float(np.linalg.norm(positions[i] - positions[j]))
+    separation = positions[i] - positions[j]
+    through = ""
+    if periodic_box is not None:
+        lengths = periodic_box.lengths
+        nearest = separation - lengths * np.round(separation / np.where(lengths > 0.0, lengths, np.inf))
+        if not np.allclose(nearest, separation):
+            through = " through a periodic face"
+        separation = nearest
+    distance = float(np.linalg.norm(separation))
     allowed = (f", by more than the {START_OVERLAP_TOLERANCE:g} of the smaller radius a settled packing's contacts "
                f"may start with" if listed else "")
-    return (f"particles {i} and {j} overlap at insertion (centre distance {distance:g} m < "
+    return (f"particles {i} and {j} overlap at insertion{through} (centre distance {distance:g} m < "
             f"radius sum {radii[i] + radii[j]:g} m{allowed}; indices count across groups in scene order)")

@@ -33,6 +33,7 @@ from pdemfem.errors import SceneError
 from pdemfem.parallel.exchange import allgather_rows
 from pdemfem.particles.energy import NO_CLUMP_BODIES, particle_energy_sums
 from pdemfem.particles.insert import _random_place
+from pdemfem.particles.periodic_images import PeriodicBox
 from pdemfem.particles.state import ParticleState
 from pdemfem.scene.derived import group_radius_range
 from pdemfem.walls.triangle_contact import point_triangle_distance_squared
@@ -223,11 +224,19 @@ class ParticleStreams(kinds.StateComponent):
         state = system.state
         owned = state.owned_count
         positions = state.positions[:owned]
+        radii = state.radii[:owned]
         margin = 2.0 * system.largest_radius
-        near = np.zeros(owned, dtype=bool)
+        periodic_box = PeriodicBox.from_lengths(system.domain_lower, system.periodic_lengths)
+        if periodic_box is not None:
+            # A particle near a periodic face stands beyond the opposite one too: a region along that face (a
+            # chute's inlet across its periodic width) must keep clear of it there.
+            images, sources = periodic_box.images(positions, margin)
+            positions = np.concatenate([positions, images])
+            radii = np.concatenate([radii, radii[sources]])
+        near = np.zeros(len(positions), dtype=bool)
         for stream in streams:
             near |= np.all((positions >= stream.lower - margin) & (positions <= stream.upper + margin), axis=1)
-        rows = np.column_stack([positions[near], state.radii[:owned][near]])
+        rows = np.column_stack([positions[near], radii[near]])
         gathered = allgather_rows(system.comm, rows, 4)
         return np.ascontiguousarray(gathered[:, :3]), np.ascontiguousarray(gathered[:, 3])
 
