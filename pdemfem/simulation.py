@@ -31,6 +31,7 @@ from pdemfem.particles.outlet import Outlets
 from pdemfem.particles.stream import ParticleStreams, stream_radius_range
 from pdemfem.particles.state import ParticleState
 from pdemfem.particles.system import ParticleSystem
+from pdemfem.schedule import Schedule
 from pdemfem.scene import derived
 from pdemfem.scene.inputs import (solid_errors_named, start_solids, start_surfaces, validate_geometry,
                                    validate_scene_coordinates)
@@ -268,8 +269,9 @@ class Simulation:
     def output_interval(self) -> float:
         return self.scene.output.every or self.scene.time.end / 100.0
 
-    def _steps_per(self, interval: float) -> int:
-        return max(1, int(round(interval / self.dt)))
+    def output_schedule(self) -> Schedule:
+        """The steps of the history rows and field outputs (every output.every)."""
+        return Schedule(self.output_interval, self.dt)
 
     @collective_errors
     def run(self, progress: bool = True) -> None:
@@ -285,9 +287,9 @@ class Simulation:
 
         end = self.scene.time.end
         total_steps = derived.steps_to_end(end, self.dt)
-        steps_per_output = self._steps_per(self.output_interval)
+        outputs = self.output_schedule()
         every = self.scene.checkpoint.every
-        steps_per_checkpoint = self._steps_per(every) if every else None
+        checkpoints = Schedule(every, self.dt) if every else None
         self.io.open()
         if self.step_count == 0 or self.step_count != self.io.resume_step:  # (resume_step: None without a restart)
             # The state the run starts from (after steps taken through the API too: the series began at the first
@@ -300,17 +302,20 @@ class Simulation:
             self._guarded(monitor.start)
             while self.step_count < total_steps:
                 step = self.step_count
-                targets = [total_steps, (step // steps_per_output + 1) * steps_per_output,
-                           (step // STOP_CHECK_EVERY + 1) * STOP_CHECK_EVERY]
-                if steps_per_checkpoint:
-                    targets.append((step // steps_per_checkpoint + 1) * steps_per_checkpoint)
+                targets = [total_steps, outputs.next_after(step), (step // STOP_CHECK_EVERY + 1) * STOP_CHECK_EVERY]
+                if checkpoints:
+                    targets.append(checkpoints.next_after(step))
                 self.step(min(targets) - step)
                 self._guarded(monitor.check)
                 step = self.step_count
                 at_end = step == total_steps
-                if at_end or self._scheduled(step, steps_per_output, self.output_interval, end):
+                if at_end or outputs.due_before_end(step, end):
                     self.io.write_output()
-                if steps_per_checkpoint and (at_end or self._scheduled(step, steps_per_checkpoint, every, end)):
+                elif outputs.is_due(step):
+                    # The interval of the end's time ends here, a step before the end, whose row stands for it: the
+                    # end's step counts for the next interval, as in a run that goes on past the end.
+                    self.surface_force_means.close()
+                if checkpoints and (at_end or checkpoints.due_before_end(step, end)):
                     self.io.write_checkpoint()
                 if bar is not None:
                     bar.update(step - bar.n)
@@ -329,21 +334,6 @@ class Simulation:
             if bar is not None:
                 bar.close()
             self.io.close()
-
-    def _scheduled(self, step: int, steps_per: int, interval: float, end: float) -> bool:
-        """Whether an output (or checkpoint) interval ends at `step`, before the end's own write.  The intervals
-        are rounded to whole steps, the end is not: with end = 10 x interval the tenth interval's step fell a
-        step or a few before the end, and the run wrote the same moment twice (with checkpoint.keep 2 that
-        pruned the checkpoint of the run's middle)."""
-        return step % steps_per == 0 and (step // steps_per) * interval < end - 0.5 * self.dt
-
-    def _end_row_closes_an_interval(self, step: int) -> bool:
-        """Whether `step` is the end's and time.end is a multiple of output.every (to half a step): the end's row
-        then takes the place of that interval's scheduled row."""
-        end, interval = self.scene.time.end, self.output_interval
-        intervals = round(end / interval)
-        return (step == derived.steps_to_end(end, self.dt) and intervals >= 1
-                and abs(intervals * interval - end) <= 0.5 * self.dt)
 
     def _guarded(self, check) -> None:
         """Run a monitor check (collective); on divergence write the output step, and a checkpoint when
@@ -426,11 +416,12 @@ class Simulation:
         names = self._surface_names()
         instantaneous = [self.wall_force(name) for name in names]
         # Before the first step of a run (or of a restart) no step has been averaged: the forces now.  A row off
-        # the output schedule (the end, a stop) leaves the interval running for the next scheduled row, except the
-        # end's row when time.end closes an output interval: it stands for that interval's row (_scheduled), so a
-        # run extended past it averages the next interval alone (it averaged two: a gate's load read +26 %).
-        on_schedule = (self.step_count % self._steps_per(self.output_interval) == 0
-                       or self._end_row_closes_an_interval(self.step_count))
+        # the output schedule (the end, a stop) leaves the interval running for the next scheduled row; when the
+        # end falls a step after the step of its own time's interval (time.end a multiple of output.every), that
+        # interval was closed there (run) and the end's row shows its mean.  So a run extended past its end has
+        # the rows of one that went on (a gate's load read +26 % and -18 % when the end's row was decided on the
+        # times alone).
+        on_schedule = self.output_schedule().is_due(self.step_count)
         means = self.surface_force_means.take(fallback=instantaneous, restart=on_schedule)
         for name, force, mean in zip(names, instantaneous, means):
             for axis, label in enumerate("xyz"):

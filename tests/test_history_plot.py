@@ -75,13 +75,19 @@ def test_a_run_extended_past_its_old_end_has_the_uninterrupted_means(tmp_path):
     assert parts["mean_force_floor_z"][end_row] not in whole["mean_force_floor_z"]
 
 
-def test_a_run_ending_a_step_past_an_interval_restarts_the_mean_at_its_end_row(tmp_path):
-    """time.end = 2 output intervals, rounded up to the step after the second row's (output.every = 5.4 dt: rows
-    every 5 steps, the end at step 11): the end's row stands for the second interval's.  Extended by raising
-    time.end, the next row (step 15) averages the steps since the end's row.  It averaged both intervals
-    (steps 6..15) before: the tester's hopper gate read +26 %."""
+@pytest.mark.parametrize("every_in_steps, rows, end_stands_for", [(5.4, [0, 5, 11, 16, 22], 11),
+                                                                   (5.2, [0, 5, 11, 16, 21], 10)])
+def test_a_run_extended_from_an_end_at_an_interval_has_the_uninterrupted_rows(every_in_steps, rows, end_stands_for,
+                                                                               tmp_path):
+    """time.end = 2 output intervals, then extended to 4 by raising time.end.  The k-th row is at the step
+    nearest k x every: with every = 5.4 dt the second interval's step (10.8 -> 11) is the end's, with 5.2 dt
+    (10.4 -> 10) the step before the end's (11).  Either way the end's row stands for the second interval
+    and the extension's rows are the uninterrupted run's, bit for bit.  Before, the rows were every
+    round(every / dt) steps: the intervals drifted from their times, the end's row was decided on the times
+    alone, and an extension averaged both intervals before the next row (a tester's hopper gate read +26 %)
+    or only the steps since a rounded-down end (-18 %)."""
     dt = GRAINS["time"]["dt"]
-    every = 5.4 * dt
+    every = every_in_steps * dt
     first = copy.deepcopy(GRAINS)
     first["time"]["end"] = 2 * every
     first["output"]["every"] = every
@@ -91,20 +97,31 @@ def test_a_run_ending_a_step_past_an_interval_restarts_the_mean_at_its_end_row(t
     extended["time"]["end"] = 4 * every
     Simulation.from_dict(extended, base_dir=tmp_path, output_dir=tmp_path / "extended",
                          restart=tmp_path / "extended" / "checkpoints" / "latest.h5").run(progress=False)
+    Simulation.from_dict(extended, base_dir=tmp_path, output_dir=tmp_path / "whole").run(progress=False)
     parts = read_history(tmp_path / "extended" / "history.csv")
-    assert list(parts["step"]) == [0, 5, 11, 15, 22]
+    whole = read_history(tmp_path / "whole" / "history.csv")
+    assert list(parts["step"]) == rows
+    after = parts["step"] > 11
+    np.testing.assert_array_equal(parts["mean_force_floor_z"][after], whole["mean_force_floor_z"][whole["step"] > 11])
+    end_row = list(parts["step"]).index(11)
+    second = list(whole["step"]).index(end_stands_for)
+    assert parts["mean_force_floor_z"][end_row] == whole["mean_force_floor_z"][second]
 
-    stepped = Simulation.from_dict(extended, base_dir=tmp_path, output_dir=tmp_path / "stepped")
-    samples = []
-    for _ in range(15):
-        stepped.step(1)
-        samples.append(stepped.wall_force("floor")[2])
-    row = list(parts["step"]).index(15)
-    # The same forces summed over the same steps (the run's and this loop's steps agree bit for bit); the
-    # division and summation order leave round-off.
-    since_end_row = np.mean(samples[11:15])
-    assert parts["mean_force_floor_z"][row] == pytest.approx(since_end_row, rel=1e-12, abs=1e-15)
-    assert not np.isclose(np.mean(samples[5:15]), since_end_row, rtol=1e-3)  # the two intervals differ here
+
+def test_writes_stay_at_their_times_over_a_thousand_intervals():
+    """An interval of 87.4 steps: rounded once to 87, the 1000th write came 400 steps early, and the writes
+    due after the end's time (steps 87,000 to 87,348 with time.end = 1000 intervals) were never written.
+    Each write at the step nearest its time: within half a step, and the last interval's is the end's."""
+    from pdemfem.schedule import Schedule
+
+    dt = 1e-5
+    schedule = Schedule(87.4 * dt, dt)
+    end = 1000 * 87.4 * dt
+    due = [step for step in range(87_500) if schedule.due_before_end(step, end)]
+    assert len(due) == 1000  # steps of the writes 0 .. 999
+    assert all(abs(step - index * 87.4) <= 0.5 for index, step in enumerate(due))
+    assert schedule.next_after(due[-1]) == 87_400  # the end's own step
+    assert schedule.next_after(0) == 87 and schedule.next_after(87) == 175
 
 
 def test_history_forces_are_means_over_the_output_interval(tmp_path):

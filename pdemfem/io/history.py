@@ -49,14 +49,17 @@ class IntervalMean(kinds.StateComponent):
     `fallback` (the value now).  `take(..., restart=False)` (a row off the output schedule: the end, a
     stop) returns the mean so far and keeps the interval going, so the next scheduled row averages its
     whole interval: a run extended past its old end (raised time.end) read a mean over the few steps since
-    that end's row.  A checkpoint keeps the interval so far (the same on every rank: it adds
-    the sums over the ranks), so the first row after a restart averages the whole interval, as the run
-    without the restart did."""
+    that end's row.  `close` ends an interval at a step of the schedule that gets no row of its own (the
+    run's end falls a few steps after it): the next row off the schedule returns that interval's mean, and
+    the steps after it count for the next interval, as in a run that goes on.  A checkpoint keeps the
+    interval so far (the same on every rank: it adds the sums over the ranks), so the first row after a
+    restart averages the whole interval, as the run without the restart did."""
 
     def __init__(self):
         self._sum = None
         self._steps = 0
         self._last = None
+        self._closed = None  # the mean of an interval closed without its row
 
     def add(self, values) -> None:
         values = np.asarray(values, dtype=float)
@@ -66,17 +69,32 @@ class IntervalMean(kinds.StateComponent):
         self._steps += 1
 
     def state_dict(self) -> dict:
-        return {"sum": kinds.global_array(np.zeros(0) if self._sum is None else self._sum),
-                "steps": kinds.scalar(int(self._steps)),
-                "last": kinds.global_array(np.zeros(0) if self._last is None else self._last)}
+        def stored(values):
+            return kinds.global_array(np.zeros(0) if values is None else values)
+
+        return {"sum": stored(self._sum), "steps": kinds.scalar(int(self._steps)), "last": stored(self._last),
+                "closed": stored(self._closed)}
 
     def load_state_dict(self, state: dict) -> None:
-        total, last = np.asarray(state["sum"], dtype=float), np.asarray(state["last"], dtype=float)
-        self._sum = total.copy() if total.size else None
+        def loaded(values):
+            values = np.asarray(values, dtype=float)
+            return values.copy() if values.size else None
+
+        self._sum, self._last, self._closed = loaded(state["sum"]), loaded(state["last"]), loaded(state["closed"])
         self._steps = int(state["steps"])
-        self._last = last.copy() if last.size else None
+
+    def close(self) -> None:
+        if self._steps:
+            self._closed = self._sum / self._steps
+            self._sum[...] = 0.0
+            self._steps = 0
 
     def take(self, fallback, restart: bool = True):
+        if self._closed is not None:
+            closed, self._closed = self._closed, None
+            if not restart:
+                self._last = closed
+                return self._last
         if self._steps:
             self._last = self._sum / self._steps
             if restart:
