@@ -220,9 +220,11 @@ def test_a_field_list_without_positions_writes_them_with_the_fields(tmp_path):
 
 
 def test_the_last_interval_ending_at_the_end_is_written_once(tmp_path):
-    """end = 4 output (and checkpoint) intervals, dt not dividing them: the intervals round to 83 steps, the
-    end to 334, so the fourth interval's write fell 2 steps before the end's and the same moment was written
-    twice (history rows 0.00996 and 0.01002 s; with keep 2 the checkpoint of step 249 was pruned for it)."""
+    """end = 4 output (and checkpoint) intervals, dt not dividing them (83.3 steps each): the end is at step 334,
+    the fourth interval's time.  When the intervals were rounded to 83 steps, the fourth interval's write fell 2
+    steps before the end's and the same moment was written twice (history rows 0.00996 and 0.01002 s; with keep
+    2 the checkpoint of step 249 was pruned for it).  Each write is now at the step nearest its time (83, 167,
+    250) and the fourth is the end's."""
     from pdemfem import Simulation
     from pdemfem.plot import read_history
 
@@ -233,6 +235,33 @@ def test_the_last_interval_ending_at_the_end_is_written_once(tmp_path):
              "output": {"every": 0.0025, "particles": []}, "checkpoint": {"every": 0.0025, "keep": 2}}
     simulation = Simulation.from_dict(scene, base_dir=tmp_path, output_dir=tmp_path / "out")
     simulation.run(progress=False)
-    assert list(read_history(tmp_path / "out" / "history.csv")["step"]) == [0, 83, 166, 249, 334]
+    assert list(read_history(tmp_path / "out" / "history.csv")["step"]) == [0, 83, 167, 250, 334]
     kept = sorted(int(path.stem.split("_")[1]) for path in (tmp_path / "out" / "checkpoints").glob("checkpoint_*.h5"))
-    assert kept == [249, 334], kept
+    assert kept == [250, 334], kept
+
+
+def test_the_index_is_rewritten_now_and_then_and_whole_at_close(tmp_path, monkeypatch):
+    """The XDMF index grows with the steps, so it is rewritten after a step only when the time since its last
+    rewrite is INDEX_REWRITE_RATIO times what that took (2000 outputs of 27 particles spent 37 of 65 s on it
+    when it was rewritten every time).  Made to wait for ever, it stays as it was (naming whole steps only),
+    and `close` writes it with every step."""
+    from mpi4py import MPI
+
+    from pdemfem.io.particle_output import DEFAULT_FIELDS, ParticleOutput
+
+    monkeypatch.setattr(xdmf, "INDEX_REWRITE_RATIO", 1e12)
+    output = ParticleOutput(tmp_path, MPI.COMM_SELF, DEFAULT_FIELDS)
+    ids = np.arange(5)
+    for step in range(4):
+        output.write(step * 1e-3, step, io_data.particle_arrays(ids, step))
+
+    def listed():
+        grid = ET.parse(tmp_path / "particles.xdmf").getroot().find("Domain/Grid")
+        return [g.get("Name") for g in grid.findall("Grid")]
+
+    assert listed() == []  # the index written at the start; every step since waits
+    output.close()
+    assert listed() == [f"step_{step:010d}" for step in range(4)]
+    monkeypatch.setattr(xdmf, "INDEX_REWRITE_RATIO", 0.0)  # rewritten after every step
+    output.write(4e-3, 4, io_data.particle_arrays(ids, 4))
+    assert listed()[-1] == "step_0000000004"

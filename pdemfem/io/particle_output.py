@@ -90,8 +90,9 @@ class ParticleOutput:
                 pass
         else:
             self._resume(int(resume_step))
+        self._index = xdmf.IndexFile(self.xdmf_path)
         if comm.rank == 0:
-            xdmf.write_atomic(self.xdmf_path, self._document())
+            self._index.write(self._document)
 
     # ------------------------------------------------------------------ write
     def _field_spec(self, name: str, values: np.ndarray) -> tuple[tuple, np.dtype]:
@@ -137,7 +138,7 @@ class ParticleOutput:
                 "fields": {name: (rows[name].shape[1:], rows[name].dtype) for name in self.fields},
             })
             self._entries.sort(key=lambda e: e["step"])
-            xdmf.write_atomic(self.xdmf_path, self._document())
+            self._index.update(self._document)
 
     def _grow_connectivity(self, handle, total: int) -> None:
         length = self._connectivity_length
@@ -158,7 +159,9 @@ class ParticleOutput:
         self._connectivity_length = new_length
 
     def close(self) -> None:
-        """Nothing stays open between writes; kept for symmetry with other writers."""
+        """Write the index if steps were written since its last rewrite (rank 0; nothing else stays open)."""
+        if self.comm.rank == 0:
+            self._index.flush(self._document)
 
     # ---------------------------------------------------------------- restart
     def _resume(self, resume_step: int) -> None:

@@ -148,9 +148,17 @@ class SimulationIO:
         if self._history is not None:
             self._history.close()
             self._history = None
+        writers = [self._particles_out, self._clumps_out, *self._solid_outputs.values()]
         self._particles_out = None
         self._clumps_out = None
         self._solid_outputs = {}
+        for writer in writers:
+            if writer is None:
+                continue
+            try:
+                writer.close()  # the series' index, up to its last step
+            except OSError as error:  # (rank 0 only) after a failed write, say so without hiding that failure
+                log.warning("could not write the index %s: %s", writer.xdmf_path, write_error_text(error))
 
     def write_output(self) -> None:
         """Collective: one history row and one step of every field series (once per step)."""

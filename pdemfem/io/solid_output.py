@@ -82,8 +82,9 @@ class SolidOutput:
                                 self.node_offset, points)
                 xdmf.write_slab(mesh.create_dataset("cells", (self.total_cells, 4), np.int64),
                                 self.cell_offset, cells)
+        self._index = xdmf.IndexFile(self.xdmf_path)
         if comm.rank == 0:
-            xdmf.write_atomic(self.xdmf_path, self._document())
+            self._index.write(self._document)
 
     def _rows(self, name, values, count):
         array = np.asarray(values)
@@ -117,10 +118,12 @@ class SolidOutput:
             self._grid_texts.pop(int(step), None)
             self._entries.append({"step": int(step), "time": float(time), "fields": fields})
             self._entries.sort(key=lambda e: e["step"])
-            xdmf.write_atomic(self.xdmf_path, self._document())
+            self._index.update(self._document)
 
     def close(self) -> None:
-        """Nothing stays open between writes."""
+        """Write the index if steps were written since its last rewrite (rank 0; nothing else stays open)."""
+        if self.comm.rank == 0:
+            self._index.flush(self._document)
 
     def _resume(self, resume_step: int) -> bool:
         """Collective: keep the file's steps up to resume_step; False when it was unreadable (moved aside to
