@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
@@ -242,6 +243,9 @@ class Simulation:
     def step(self, count: int = 1) -> None:
         """Advance `count` steps; during `run`, stop early when a particle runs away (moves further
         than the monitor's limit since the list build; the check that follows stops the run)."""
+        if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 0:
+            # (int(2.5) ran 2 steps, range(-5) none, without a word)
+            raise ValueError(f"Simulation.step(count): count is a whole number of steps >= 0, got {count!r}")
         system = self.particle_system
         for _ in range(int(count)):
             if self.streams is not None:

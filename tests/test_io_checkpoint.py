@@ -268,3 +268,15 @@ def test_a_write_failing_on_one_rank_fails_on_every_rank(tmp_path, where):
                    for line in lines), completed.stdout
     assert f"files: {checkpoint_path(tmp_path, 1).name}" in lines, completed.stdout
     assert "previous checkpoint readable: 200 particles" in lines, completed.stdout
+
+
+def test_a_damaged_layout_is_named_without_python_internals(tmp_path):
+    """A checkpoint whose structure lost a piece (here a dataset's checksum attribute; a tester's flipped bytes
+    near the end of a file met an attribute read as None) was 'file is corrupt (TypeError: 'NoneType' object
+    is not subscriptable)': the right outcome, with Python's words for it."""
+    path = small_checkpoint(tmp_path / "c.h5")
+    with h5py.File(path, "r+") as handle:
+        del handle["particles/positions"].attrs["sum64"]
+    error = problem_of(path)
+    assert "file is corrupt" in error.problem, error.problem
+    assert "Error" not in error.problem and "NoneType" not in error.problem, error.problem

@@ -71,6 +71,7 @@ per rank pair, not 2 GB.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import secrets
 import shutil
@@ -94,6 +95,7 @@ from pdemfem.io.output_guard import DIVERGED_SUFFIX, agree_on_error, write_error
 # is stored as its components' state dicts (a JSON manifest maps each dataset and scalar to its
 # component path and kind); version 1 named the datasets by field.
 FORMAT_VERSION = 7
+log = logging.getLogger("pdemfem")
 MANIFEST = "state_manifest"
 MARKER = "pdemfem_checkpoint"
 LATEST = "latest.h5"
@@ -765,8 +767,12 @@ def read_checkpoint(path, comm, expected_hash: str | None = None, force: bool = 
                                      expected_physics)
     except _Bad as bad:
         failure = (bad.problem, bad.fix)
-    except Exception as exc:  # h5py/HDF5 errors on reading data: damaged inside
-        failure = (f"file is corrupt ({type(exc).__name__}: {exc})", OLDER_FIX)
+    except OSError as exc:  # HDF5's own errors on reading data: damaged inside
+        failure = (f"file is corrupt (HDF5: {exc})", OLDER_FIX)
+    except Exception as exc:  # a damaged layout met by h5py or our reader (a missing attribute reads as None)
+        log.debug("checkpoint %s: %s", path, exc, exc_info=True)
+        failure = ("file is corrupt (its layout is damaged: an attribute or dataset the checkpoint must have "
+                   "could not be read)", OLDER_FIX)
     failures = comm.allgather(failure)
     failure = next((f for f in failures if f is not None), None)
     if failure is None:
