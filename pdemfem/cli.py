@@ -561,9 +561,11 @@ def _report(path, scene, base_dir, placed, solids=None, mesh_warnings=()) -> tup
             if shortest is None:
                 lines.append("contact duration: no contacts possible (one particle, no walls)")
             else:
+                pair, steps_per_contact, need = derived.tightest_contact_resolution(scene, speed, dt)
                 lines.append(f"contact duration at {speed:.3g} m/s: {', '.join(parts)}; "
-                             f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact; "
-                             f"want >= {derived.required_steps_per_contact(scene):.0f})")
+                             f"dt = {dt / shortest:.3g} of the shortest ({shortest / dt:.1f} steps per contact); "
+                             f"tightest for its restitution: {pair}, {steps_per_contact:.1f} steps, wants >= "
+                             f"{need:.0f}")
         per_particle = derived.bytes_per_particle(derived.contact_history_columns(scene))
         memory = derived.sphere_count(scene) * per_particle  # derived.memory_estimate_bytes
         lines.append(f"memory: ~{_format_bytes(memory)} for the particles ({per_particle} B/particle, "

@@ -483,3 +483,22 @@ def test_odd_yaml_shapes_are_explained():
     assert "particles[0]: expected a mapping of keys (key: value), got nothing (null)" in str(
         scene_error(modified(lambda s: s.update(particles=[None]))))
     assert "1: key 1 is not a name" in str(scene_error(modified(lambda s: s.update({1: "x"}))))
+
+
+def test_check_names_the_pair_with_the_fewest_steps_for_its_restitution():
+    """The shortest contact (grains on a stiff steel floor, restitution 0.6: 30 steps wanted) is not the one
+    that binds: the grains' own contact at restitution 0.4 wants 54.  check printed the shortest contact's
+    steps beside the other pair's 54 ('51.0 steps per contact; want >= 54' with no warning)."""
+    def change(scene):
+        scene["materials"]["steel"] = {"density": 7800, "youngs_modulus": 2e11, "poisson_ratio": 0.3}
+        scene["walls"][0]["material"] = "steel"
+        scene["interactions"] = {"default": {"restitution": 0.4, "friction": 0.5},
+                                 "glass-steel": {"restitution": 0.6, "friction": 0.5}}
+    scene = load_scene(modified(change))[0]
+    speed = derived.expected_impact_speed(scene)
+    durations = derived.contact_duration(scene, speed)
+    assert durations.particle_wall < durations.particle_particle  # the wall's contact is the shortest
+    dt = durations.particle_particle / 60.0
+    pair, steps, need = derived.tightest_contact_resolution(scene, speed, dt)
+    assert pair == "particle-particle glass-glass" and steps == pytest.approx(60.0, rel=1e-12)
+    assert need == derived.steps_per_contact_required("hertz_mindlin", 0.4) > 50

@@ -743,6 +743,21 @@ def contact_duration(scene: Scene, speed: float) -> ContactDurations:
     return ContactDurations(**best)
 
 
+def tightest_contact_resolution(scene: Scene, speed: float, dt: float) -> Optional[Tuple[str, float, float]]:
+    """(pair, steps per contact at `speed`, steps its restitution needs) of the pair with the fewest steps for
+    its need: 'particle-particle glass-glass' or 'particle-wall glass on steel (wall floor)'; None without pairs."""
+    best = None
+    for kind, name_a, name_b, m_eff, r_eff, e_eff, surface in _pairs(scene, with_surface=True):
+        interaction = scene.interaction(name_a, name_b)
+        steps = _pair_duration(interaction, m_eff, r_eff, e_eff, speed) / dt
+        need = steps_per_contact_required(interaction.model, interaction.restitution)
+        if best is None or steps / need < best[1] / best[2]:
+            label = (f"{kind.replace('_', '-')} {name_a}-{name_b}" if surface is None
+                     else f"{kind.replace('_', '-')} {name_a} on {name_b} ({surface})")
+            best = (label, steps, need)
+    return best
+
+
 # --------------------------------------------------------------------------- memory
 
 # Per particle, in bytes (see memory_estimate_bytes):
