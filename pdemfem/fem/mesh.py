@@ -236,6 +236,7 @@ def _assemble_global_mesh(source, points, tets, triangle_groups) -> GlobalMesh:
             )
         groups[name] = triangles
     mesh = GlobalMesh(source=source, points=points, tets=tets)
+    check_cells(mesh, check_inverted=False)  # a cell with a repeated node read as a surface group's missing face
     mesh.tets = _oriented_cells(mesh)
     for name, triangles in groups.items():
         mesh.face_groups[name] = orient_faces(mesh, triangles, name)
@@ -279,8 +280,8 @@ def _oriented_cells(mesh: GlobalMesh) -> np.ndarray:
     return mesh.tets
 
 
-def check_cells(mesh: GlobalMesh) -> None:
-    """MeshError for degenerate (near-zero volume) or inverted (negative volume) cells."""
+def check_cells(mesh: GlobalMesh, check_inverted: bool = True) -> None:
+    """MeshError for degenerate (near-zero volume) or, with `check_inverted`, inverted (negative volume) cells."""
     volumes = signed_volumes(mesh.points, mesh.tets)
     corners = mesh.points[mesh.tets]
     longest = np.zeros(len(mesh.tets))
@@ -295,6 +296,8 @@ def check_cells(mesh: GlobalMesh) -> None:
             problem=f"{len(degenerate)} degenerate cell(s) with (near) zero volume (quality {quality[degenerate].min():.1e})",
             fix="remesh; check for duplicate or collinear nodes",
         )
+    if not check_inverted:
+        return
     inverted = np.flatnonzero(volumes < 0)
     if len(inverted):
         raise MeshError(

@@ -119,3 +119,20 @@ def test_box_mesh_counts_and_surface_orientation():
     assert np.all(normals[:, 2] > 0)  # outward on the top face
     assert np.isclose(0.5 * normals[:, 2].sum(), 2.0)  # covers the 2 x 1 face exactly
     assert np.all(velocities == 0.0)
+
+
+def test_a_cell_with_a_repeated_node_is_named_before_the_groups_are_matched(tmp_path):
+    """A tetrahedron whose fourth node repeats its third (nodes 1 2 3 3) is degenerate; the group's triangle
+    that was its face no longer matches one, and that was reported first ('not faces of any tetrahedron ...
+    regenerate the mesh so surface and volume meshes are conforming')."""
+    cells = [meshio.CellBlock("tetra", np.array([[0, 1, 2, 3], [1, 2, 3, 3], [1, 2, 4, 0]])),
+             meshio.CellBlock("triangle", np.array([[1, 3, 4]]))]
+    mesh = meshio.Mesh(np.array(UNIT_TET, float), cells,
+                       cell_data={"gmsh:physical": [np.array([1, 1, 1]), np.array([2])],
+                                  "gmsh:geometrical": [np.array([1, 1, 1]), np.array([2])]},
+                       field_data={"body": np.array([1, 3]), "top": np.array([2, 2])})
+    path = str(tmp_path / "repeated.msh")
+    meshio.write(path, mesh, file_format="gmsh22", binary=False)
+    with pytest.raises(MeshError, match="degenerate") as error:
+        Solid(_config(path), material())
+    assert "cells [1]" in error.value.where
