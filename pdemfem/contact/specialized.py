@@ -6,7 +6,8 @@ and the pair loop of the settle benchmark's bed took 11 % less time (docs/perfor
 folds a module's global constants, but caches a kernel on disk only when it lives in a file of its
 own: so each composition gets a copy of pdemfem/contact/forces.py with COMPILED_COMPOSITION set,
 written once into a folder per version of the package's source (module_folder), and imported from
-there.  The first run of a composition compiles its kernels (5-12 s); later runs load them from the
+there.  The first run of a composition compiles its kernels (about 15 s, and 10 s more for the pair loop of
+first evaluations at the first contact); later runs load them from the
 cache like every other kernel.
 
 Results agree with the generic kernels' to round-off (tests/test_contact_specialized.py).  Without a

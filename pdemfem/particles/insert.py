@@ -20,6 +20,7 @@ from pdemfem.errors import SceneError
 from pdemfem.neighbors.cells import cell_grid, cell_indices, cell_starts
 from pdemfem.particles.periodic_images import PeriodicBox
 from pdemfem.particles.placement_grid import overlaps_stored, store_sphere
+from pdemfem.scene.derived import group_radius_range
 from pdemfem.scene.inputs import START_OVERLAP_TOLERANCE
 
 
@@ -195,6 +196,12 @@ def insert_particles(scene) -> InsertedParticles:
     placed_radii = np.zeros(0)
     placed_labels = np.zeros(0, dtype=np.int64)
     periodic_box = PeriodicBox.from_scene(scene)
+    largest = max((group_radius_range(group)[1] for group in scene.particles), default=0.0)
+    if periodic_box is not None and np.any(periodic_box.periodic & (periodic_box.upper - periodic_box.lower
+                                                                    <= 4.0 * largest)):
+        # A period of two diameters or less would have the particles overlap their own images: the particle
+        # system refuses it, naming the period and the interaction cutoff it must exceed twice.
+        periodic_box = None
     for index, group in enumerate(scene.particles):
         where = f"particles[{index}].insert"
         insert = group.insert
