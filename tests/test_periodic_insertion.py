@@ -45,7 +45,10 @@ def _minimum_image_overlap(positions, radii) -> float:
 
 def test_images_cover_faces_edges_and_corners():
     box = PeriodicBox(np.zeros(3), np.full(3, 1.0), np.array([True, True, False]))
-    images, sources = box.images(np.array([[0.05, 0.95, 0.5], [0.5, 0.5, 0.01]]), 0.1)
+    positions, radii, rows = box.with_images(np.array([[0.05, 0.95, 0.5], [0.5, 0.5, 0.01]]), np.array([1.0, 2.0]),
+                                             0.1)
+    images, sources = positions[2:], rows[2:]
+    assert list(rows[:2]) == [0, 1] and list(radii) == [1.0, 2.0] + [1.0] * len(images)
     # The first is near x = 0 and y = 1: images across x, across y and across the (x, y) edge; the second is
     # near z = 0 only, which is not periodic.
     expected = {(1.05, 0.95, 0.5), (0.05, -0.05, 0.5), (1.05, -0.05, 0.5)}

@@ -56,13 +56,12 @@ def load_mesh(spec, base_dir: Path) -> GlobalMesh:
     """A mesh from the scene's `mesh:` value (file path relative to base_dir, or BoxMeshConfig)."""
     if isinstance(spec, BoxMeshConfig):
         mesh = generate_box_mesh(spec)
-    else:
-        path = Path(spec)
-        if not path.is_absolute():
-            path = Path(base_dir) / path
-        mesh = read_mesh_file(path)
-    check_cells(mesh)
-    return mesh
+        check_cells(mesh)
+        return mesh
+    path = Path(spec)
+    if not path.is_absolute():
+        path = Path(base_dir) / path
+    return read_mesh_file(path)  # (its cells checked as it is assembled)
 
 
 def generate_box_mesh(spec: BoxMeshConfig) -> GlobalMesh:
@@ -236,8 +235,8 @@ def _assemble_global_mesh(source, points, tets, triangle_groups) -> GlobalMesh:
             )
         groups[name] = triangles
     mesh = GlobalMesh(source=source, points=points, tets=tets)
-    check_cells(mesh, check_inverted=False)  # a cell with a repeated node read as a surface group's missing face
     mesh.tets = _oriented_cells(mesh)
+    check_cells(mesh)  # before the groups: a cell with a repeated node read as a group's missing face
     for name, triangles in groups.items():
         mesh.face_groups[name] = orient_faces(mesh, triangles, name)
     return mesh
@@ -280,8 +279,8 @@ def _oriented_cells(mesh: GlobalMesh) -> np.ndarray:
     return mesh.tets
 
 
-def check_cells(mesh: GlobalMesh, check_inverted: bool = True) -> None:
-    """MeshError for degenerate (near-zero volume) or, with `check_inverted`, inverted (negative volume) cells."""
+def check_cells(mesh: GlobalMesh) -> None:
+    """MeshError for degenerate (near-zero volume) or inverted (negative volume) cells."""
     volumes = signed_volumes(mesh.points, mesh.tets)
     corners = mesh.points[mesh.tets]
     longest = np.zeros(len(mesh.tets))
@@ -296,8 +295,6 @@ def check_cells(mesh: GlobalMesh, check_inverted: bool = True) -> None:
             problem=f"{len(degenerate)} degenerate cell(s) with (near) zero volume (quality {quality[degenerate].min():.1e})",
             fix="remesh; check for duplicate or collinear nodes",
         )
-    if not check_inverted:
-        return
     inverted = np.flatnonzero(volumes < 0)
     if len(inverted):
         raise MeshError(

@@ -89,10 +89,8 @@ def first_overlap(positions: np.ndarray, radii: np.ndarray, labels=None, toleran
         return None
     labels = np.full(len(radii), -1, dtype=np.int64) if labels is None else np.asarray(labels, dtype=np.int64)
     if periodic_box is not None:
-        positions = periodic_box.wrapped(positions)
-        images, sources = periodic_box.images(positions, 2.0 * float(radii.max()))
-        rows = np.concatenate([np.arange(len(radii)), sources])
-        overlap = first_overlap(np.concatenate([positions, images]), radii[rows], labels[rows], tolerance)
+        positions, radii, rows = periodic_box.with_images(positions, radii, 2.0 * float(radii.max()))
+        overlap = first_overlap(positions, radii, labels[rows], tolerance)
         return None if overlap is None else (int(rows[overlap[0]]), int(rows[overlap[1]]))
     lower, size, dimensions = cell_grid(positions, 2.0 * float(radii.max()))
     cells = cell_indices(positions, lower, size, dimensions)
@@ -286,10 +284,8 @@ def _random_positions(group, radii, placed_positions, placed_radii, where, perio
     low, high = (np.array(corner, dtype=float) for corner in insert.region.box)
     if periodic_box is not None and len(placed_radii):
         # The earlier groups' particles near a periodic face also stand beyond the opposite one.
-        placed_positions = periodic_box.wrapped(placed_positions)
-        images, sources = periodic_box.images(placed_positions, 2.0 * float(max(radii.max(), placed_radii.max())))
-        placed_positions = np.concatenate([placed_positions, images])
-        placed_radii = np.concatenate([placed_radii, placed_radii[sources]])
+        placed_positions, placed_radii, _ = periodic_box.with_images(
+            placed_positions, placed_radii, 2.0 * float(max(radii.max(), placed_radii.max())))
     largest = float(max(radii.max(), placed_radii.max() if len(placed_radii) else 0.0))
     if np.any(high - low < 2.0 * radii.max()):
         raise SceneError(f"{where}.region.box", "the region is thinner than one particle diameter",
@@ -314,8 +310,7 @@ def _describe_overlap(scene, overlap, positions, radii, listed=False, periodic_b
     separation = positions[i] - positions[j]
     through = ""
     if periodic_box is not None:
-        lengths = periodic_box.lengths
-        nearest = separation - lengths * np.round(separation / np.where(lengths > 0.0, lengths, np.inf))
+        nearest = periodic_box.nearest_separation(separation)
         if not np.allclose(nearest, separation):
             through = " through a periodic face"
         separation = nearest

@@ -48,15 +48,21 @@ class PeriodicBox:
             positions[:, axis] = self.lower[axis] + np.mod(positions[:, axis] - self.lower[axis], length)
         return positions
 
-    def images(self, positions: np.ndarray, reach: float):
-        """(image positions, rows of `positions` they copy) of the (wrapped) positions within `reach` of a
-        periodic face, shifted by the period across it: along each axis, edges and corners included."""
-        positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    def nearest_separation(self, separation: np.ndarray) -> np.ndarray:
+        """The separation to the nearest periodic image along the periodic axes."""
+        lengths = self.lengths
+        return separation - lengths * np.round(separation / np.where(lengths > 0.0, lengths, np.inf))
+
+    def with_images(self, positions: np.ndarray, radii: np.ndarray, reach: float):
+        """(positions, radii, rows): the positions moved into the box, followed by the images of those within
+        `reach` of a periodic face, shifted by the period across it (along each axis, edges and corners
+        included), with their radii; rows[k] is the input row that position k copies."""
+        positions = self.wrapped(positions)
         lengths = self.lengths
         near_lower = positions - self.lower < reach
         near_upper = self.upper - positions < reach
         axes = np.flatnonzero(self.periodic)
-        image_rows, image_positions = [], []
+        rows, shifted = [np.arange(len(positions))], [positions]
         for shifts in itertools.product((-1, 0, 1), repeat=len(axes)):
             if not any(shifts):
                 continue
@@ -67,9 +73,8 @@ class PeriodicBox:
                     # +1: a particle near the lower face reappears beyond the upper one.
                     selected &= near_lower[:, axis] if shift > 0 else near_upper[:, axis]
                     offset[axis] = shift * lengths[axis]
-            rows = np.flatnonzero(selected)
-            image_rows.append(rows)
-            image_positions.append(positions[rows] + offset)
-        if not image_rows:
-            return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-        return np.concatenate(image_positions), np.concatenate(image_rows).astype(np.int64)
+            selected_rows = np.flatnonzero(selected)
+            rows.append(selected_rows)
+            shifted.append(positions[selected_rows] + offset)
+        rows = np.concatenate(rows).astype(np.int64)
+        return np.concatenate(shifted), np.asarray(radii, dtype=float)[rows], rows

@@ -230,9 +230,7 @@ class ParticleStreams(kinds.StateComponent):
         if periodic_box is not None:
             # A particle near a periodic face stands beyond the opposite one too: a region along that face (a
             # chute's inlet across its periodic width) must keep clear of it there.
-            images, sources = periodic_box.images(positions, margin)
-            positions = np.concatenate([positions, images])
-            radii = np.concatenate([radii, radii[sources]])
+            positions, radii, _ = periodic_box.with_images(positions, radii, margin)
         near = np.zeros(len(positions), dtype=bool)
         for stream in streams:
             near |= np.all((positions >= stream.lower - margin) & (positions <= stream.upper + margin), axis=1)

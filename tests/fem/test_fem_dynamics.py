@@ -47,6 +47,21 @@ def test_longitudinal_wave_travels_at_bar_speed():
         assert error <= envelope
 
 
+def modified_energy(solid, dt):
+    """(H, midpoint energy, kinetic energy).  H is exactly conserved by undamped, unloaded central difference:
+    H = 1/2 v^T (M - dt^2/4 K) v + 1/2 ubar^T K ubar,  ubar = (u^n + u^{n+1}) / 2,  v = v^{n+1/2}."""
+    v = solid.velocity_vec
+    work = v.duplicate()
+    ubar = solid.displacement_vec.copy()
+    ubar.axpy(-0.5 * dt, v)
+    solid.stiffness.mult(v, work)
+    vKv = work.dot(v)
+    solid.stiffness.mult(ubar, work)
+    kinetic = solid.kinetic_energy()
+    midpoint = kinetic + 0.5 * work.dot(ubar)
+    return midpoint - dt**2 / 8 * vKv, midpoint, kinetic
+
+
 @pytest.fixture(scope="module")
 def released_cantilever():
     """P2 cantilever (L/h = 10, width 2 so z-bending is the lowest mode) released from its gravity sag.
@@ -68,27 +83,13 @@ def released_cantilever():
     solid.set_gravity((0.0, 0.0, 0.0))
     dt = solid.critical_time_step()
     tip = np.isclose(solid.reference_positions[:, 0], 10.0)
-    work = u.duplicate()
-
-    def modified_energy():
-        # exactly conserved by undamped, unloaded central difference:
-        # H = 1/2 v^T (M - dt^2/4 K) v + 1/2 ubar^T K ubar,  ubar = (u^n + u^{n+1}) / 2,  v = v^{n+1/2}
-        v = solid.velocity_vec
-        ubar = solid.displacement_vec.copy()
-        ubar.axpy(-0.5 * dt, v)
-        solid.stiffness.mult(v, work)
-        vKv = work.dot(v)
-        solid.stiffness.mult(ubar, work)
-        kinetic = solid.kinetic_energy()
-        midpoint = kinetic + 0.5 * work.dot(ubar)
-        return midpoint - dt**2 / 8 * vKv, midpoint, kinetic
 
     tip_history, energies = [], []
     for n in range(10_000):
         solid.step(dt)
         tip_history.append(solid.displacements[tip[: solid.n_owned_nodes], 2].mean())
         if n % 50 == 0:
-            energies.append(modified_energy())
+            energies.append(modified_energy(solid, dt))
     return dict(solid=solid, dt=dt, tip=np.array(tip_history), energies=np.array(energies), omega_rayleigh=omega_rayleigh,
                 initial_strain_energy=initial_strain_energy)
 
@@ -309,22 +310,11 @@ def test_rayleigh_damping_books_the_energy_it_takes(alpha, beta_omega, mass):
         velocities[beam.constrained_dofs.reshape(-1, 3)] = 0.0
         beam.set_state(np.zeros_like(velocities), velocities)
         dt = 0.9 * beam.critical_time_step()
-        work = beam.displacement_vec.duplicate()
-
-        def modified_energy():
-            v = beam.velocity_vec
-            ubar = beam.displacement_vec.copy()
-            ubar.axpy(-0.5 * dt, v)
-            beam.stiffness.mult(v, work)
-            vKv = work.dot(v)
-            beam.stiffness.mult(ubar, work)
-            return beam.kinetic_energy() + 0.5 * work.dot(ubar) - dt**2 / 8 * vKv
-
-        start = modified_energy()
+        start = modified_energy(beam, dt)[0]
         largest_error = 0.0
         for n in range(1500):
             beam.step(dt)
             if n % 100 == 99:
-                largest_error = max(largest_error, abs(modified_energy() + beam.damping_work - start))
+                largest_error = max(largest_error, abs(modified_energy(beam, dt)[0] + beam.damping_work - start))
         assert beam.damping_work > 0.5 * start, (beam.damping_work, start)
         assert largest_error <= 1e-11 * start, (largest_error, start)
